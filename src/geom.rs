@@ -1,0 +1,99 @@
+//! Axis-aligned boxes and small geometric helpers shared by the scene, the tree and the DoV code.
+
+use glam::{Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// An axis-aligned bounding box. An empty box has `min > max` on every axis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Default for Aabb {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
+
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        Self { min, max }
+    }
+
+    pub fn from_points(points: impl IntoIterator<Item = Vec3>) -> Self {
+        points.into_iter().fold(Self::EMPTY, |b, p| b.grow(p))
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    #[must_use]
+    pub fn grow(self, p: Vec3) -> Self {
+        Self { min: self.min.min(p), max: self.max.max(p) }
+    }
+
+    #[must_use]
+    pub fn union(self, o: Aabb) -> Self {
+        Self { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    pub fn extent(&self) -> Vec3 {
+        (self.max - self.min).max(Vec3::ZERO)
+    }
+
+    /// Whether `o` lies inside `self` (boundaries included).
+    pub fn contains(&self, o: &Aabb) -> bool {
+        self.min.cmple(o.min).all() && self.max.cmpge(o.max).all()
+    }
+
+    pub fn contains_point(&self, p: Vec3) -> bool {
+        self.min.cmple(p).all() && self.max.cmpge(p).all()
+    }
+
+    pub fn intersects(&self, o: &Aabb) -> bool {
+        self.min.cmple(o.max).all() && self.max.cmpge(o.min).all()
+    }
+
+    /// The box of the eight transformed corners: a conservative bound of the transformed content.
+    pub fn transformed(&self, m: &Mat4) -> Aabb {
+        if self.is_empty() {
+            return *self;
+        }
+        let (a, b) = (self.min, self.max);
+        Aabb::from_points((0..8).map(|i| {
+            let c = Vec3::new(
+                if i & 1 == 0 { a.x } else { b.x },
+                if i & 2 == 0 { a.y } else { b.y },
+                if i & 4 == 0 { a.z } else { b.z },
+            );
+            m.transform_point3(c)
+        }))
+    }
+
+    /// `[x0, y0, z0, x1, y1, z1]`, the order the CLI and the JSON outputs use.
+    pub fn to_array(&self) -> [f32; 6] {
+        [self.min.x, self.min.y, self.min.z, self.max.x, self.max.y, self.max.z]
+    }
+
+    pub fn from_array(a: [f32; 6]) -> Self {
+        Self { min: Vec3::new(a[0], a[1], a[2]), max: Vec3::new(a[3], a[4], a[5]) }
+    }
+
+    pub fn surface_area(&self) -> f32 {
+        let e = self.extent();
+        2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+    }
+
+    pub fn volume(&self) -> f32 {
+        let e = self.extent();
+        e.x * e.y * e.z
+    }
+}

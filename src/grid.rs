@@ -1,0 +1,132 @@
+//! The viewing-cell grid: a box region cut into nx × ny × nz cells (y is height).
+//!
+//! Sample points are the cell corners, shared between neighbouring cells: a grid of nx × ny × nz
+//! cells has (nx+1)(ny+1)(nz+1) corners, each measured once.
+
+use glam::{UVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::geom::Aabb;
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ViewGrid {
+    pub region: Aabb,
+    /// Cells along x, y (height layers) and z.
+    pub dims: [u32; 3],
+}
+
+impl ViewGrid {
+    pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
+        Self { region, dims }
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        let r = self.region;
+        if !(r.min.is_finite() && r.max.is_finite()) || r.min.cmpgt(r.max).any() {
+            return Err(format!("grid region {:?} is not a finite box", r.to_array()));
+        }
+        if self.dims.contains(&0) {
+            return Err(format!("grid dims {:?} must all be at least 1", self.dims));
+        }
+        Ok(())
+    }
+
+    pub fn cell_count(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize).product()
+    }
+
+    pub fn cell_size(&self) -> Vec3 {
+        self.region.extent() / UVec3::from(self.dims).as_vec3()
+    }
+
+    /// Linear cell id: x fastest, then z, then y (height layers outermost).
+    pub fn cell_id(&self, c: [u32; 3]) -> usize {
+        let [nx, _, nz] = self.dims.map(|d| d as usize);
+        (c[1] as usize * nz + c[2] as usize) * nx + c[0] as usize
+    }
+
+    pub fn cell_coords(&self, id: usize) -> [u32; 3] {
+        let [nx, _, nz] = self.dims.map(|d| d as usize);
+        [(id % nx) as u32, (id / (nx * nz)) as u32, ((id / nx) % nz) as u32]
+    }
+
+    /// The cell holding `p`; points on an inner boundary belong to the upper cell, points on the
+    /// region's upper face to the last cell. `None` outside the region.
+    pub fn cell_of(&self, p: Vec3) -> Option<[u32; 3]> {
+        if !p.is_finite() || !self.region.contains_point(p) {
+            return None;
+        }
+        let rel = (p - self.region.min) / self.cell_size();
+        let mut c = [0u32; 3];
+        for a in 0..3 {
+            let f = if rel[a].is_finite() { rel[a].floor() as i64 } else { 0 };
+            c[a] = f.clamp(0, self.dims[a] as i64 - 1) as u32;
+        }
+        Some(c)
+    }
+
+    pub fn cell_box(&self, c: [u32; 3]) -> Aabb {
+        let s = self.cell_size();
+        let min = self.region.min + UVec3::from(c).as_vec3() * s;
+        Aabb::new(min, min + s)
+    }
+
+    /// Number of shared corner sample points.
+    pub fn corner_count(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize + 1).product()
+    }
+
+    /// Linear id of corner (i, j, k), same axis order as cells.
+    pub fn corner_id(&self, c: [u32; 3]) -> usize {
+        let [nx, _, nz] = self.dims.map(|d| d as usize + 1);
+        (c[1] as usize * nz + c[2] as usize) * nx + c[0] as usize
+    }
+
+    pub fn corner_coords(&self, id: usize) -> [u32; 3] {
+        let [nx, _, nz] = self.dims.map(|d| d as usize + 1);
+        [(id % nx) as u32, (id / (nx * nz)) as u32, ((id / nx) % nz) as u32]
+    }
+
+    pub fn corner_position(&self, c: [u32; 3]) -> Vec3 {
+        self.region.min + UVec3::from(c).as_vec3() * self.cell_size()
+    }
+
+    /// The ids of the 8 corners of a cell.
+    pub fn cell_corners(&self, c: [u32; 3]) -> [usize; 8] {
+        std::array::from_fn(|i| {
+            self.corner_id([c[0] + (i as u32 & 1), c[1] + ((i as u32 >> 1) & 1), c[2] + ((i as u32 >> 2) & 1)])
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_round_trip_and_corners_are_shared() {
+        let g = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::new(4.0, 2.0, 3.0)), [4, 2, 3]);
+        for id in 0..g.cell_count() {
+            assert_eq!(g.cell_id(g.cell_coords(id)), id);
+        }
+        for id in 0..g.corner_count() {
+            assert_eq!(g.corner_id(g.corner_coords(id)), id);
+        }
+        // Neighbouring cells along x share 4 corners.
+        let a = g.cell_corners([0, 0, 0]);
+        let b = g.cell_corners([1, 0, 0]);
+        assert_eq!(a.iter().filter(|x| b.contains(x)).count(), 4);
+        assert_eq!(g.corner_count(), 5 * 3 * 4);
+    }
+
+    #[test]
+    fn cell_of_boundaries() {
+        let g = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::new(4.0, 2.0, 4.0)), [4, 1, 4]);
+        assert_eq!(g.cell_of(Vec3::new(1.0, 0.5, 0.0)), Some([1, 0, 0]));
+        assert_eq!(g.cell_of(Vec3::new(4.0, 2.0, 4.0)), Some([3, 0, 3]));
+        assert_eq!(g.cell_of(Vec3::new(4.01, 1.0, 1.0)), None);
+        assert_eq!(g.cell_of(Vec3::new(f32::NAN, 1.0, 1.0)), None);
+        let c = g.cell_of(Vec3::new(2.5, 1.0, 3.5)).unwrap();
+        assert!(g.cell_box(c).contains_point(Vec3::new(2.5, 1.0, 3.5)));
+    }
+}

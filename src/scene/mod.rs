@@ -1,0 +1,159 @@
+//! The scene model: base meshes stored once, objects as instances of them.
+//!
+//! An object is the unit the R-tree indexes and the DoV is measured for. Its geometry is its base
+//! mesh under its transform; many objects may share one base mesh (instances are stored once).
+
+pub mod manifest;
+pub mod obj;
+
+use glam::{Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::geom::Aabb;
+use crate::grid::ViewGrid;
+
+/// An indexed triangle mesh in its own (model) space.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Mesh {
+    pub positions: Vec<[f32; 3]>,
+    /// Three indices per triangle, counter-clockwise seen from outside.
+    pub indices: Vec<u32>,
+}
+
+impl Mesh {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        Aabb::from_points(self.positions.iter().map(|p| Vec3::from(*p)))
+    }
+
+    /// The triangles as corner positions.
+    pub fn triangles(&self) -> impl Iterator<Item = [Vec3; 3]> + '_ {
+        self.indices.chunks_exact(3).map(|t| {
+            [
+                Vec3::from(self.positions[t[0] as usize]),
+                Vec3::from(self.positions[t[1] as usize]),
+                Vec3::from(self.positions[t[2] as usize]),
+            ]
+        })
+    }
+
+    /// Checks what every consumer relies on: finite coordinates, whole triangles, indices in range.
+    /// Returns the reason of the first violation.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if let Some(i) = self.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+            return Err(format!("vertex {i} has a non-finite coordinate {:?}", self.positions[i]));
+        }
+        if self.indices.len() % 3 != 0 {
+            return Err(format!("{} indices is not a whole number of triangles", self.indices.len()));
+        }
+        let n = self.positions.len();
+        if let Some(&bad) = self.indices.iter().find(|&&i| i as usize >= n) {
+            return Err(format!("index {bad} out of range ({n} vertices)"));
+        }
+        Ok(())
+    }
+}
+
+/// Geometry stored once and instanced by objects.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaseMesh {
+    pub name: String,
+    pub mesh: Mesh,
+}
+
+/// One instance: a base mesh under a transform, with a unique name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Object {
+    pub name: String,
+    /// Index into [`Scene::meshes`].
+    pub mesh: u32,
+    pub transform: Mat4,
+}
+
+/// A static world: base meshes, their instances and, optionally, the viewing-cell grid it brings.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Scene {
+    pub meshes: Vec<BaseMesh>,
+    pub objects: Vec<Object>,
+    /// The default viewing-cell grid (the city generator writes one; OBJ files have none).
+    pub grid: Option<ViewGrid>,
+}
+
+impl Scene {
+    /// Loads an OBJ file or a scene manifest (`.json`), chosen by extension.
+    pub fn load(path: &std::path::Path) -> Result<Scene> {
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let scene = match ext.as_str() {
+            "json" => manifest::read(path)?,
+            "obj" => obj::read(path)?,
+            _ => return Err(Error::bad_file(path, "unknown scene format: expected .obj or .json (a scene manifest)")),
+        };
+        scene.check().map_err(|reason| Error::bad_file(path, reason))?;
+        Ok(scene)
+    }
+
+    pub fn object_mesh(&self, object: usize) -> &Mesh {
+        &self.meshes[self.objects[object].mesh as usize].mesh
+    }
+
+    /// World-space bounds of one object (its mesh box under the transform: conservative).
+    pub fn object_bounds(&self, object: usize) -> Aabb {
+        self.object_mesh(object).bounds().transformed(&self.objects[object].transform)
+    }
+
+    /// World-space bounds of every object, in object order (computes each mesh box once).
+    pub fn all_object_bounds(&self) -> Vec<Aabb> {
+        let mesh_boxes: Vec<Aabb> = self.meshes.iter().map(|m| m.mesh.bounds()).collect();
+        self.objects.iter().map(|o| mesh_boxes[o.mesh as usize].transformed(&o.transform)).collect()
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        self.all_object_bounds().into_iter().fold(Aabb::EMPTY, Aabb::union)
+    }
+
+    /// Full-detail triangles of one object, in world space.
+    pub fn object_triangles(&self, object: usize) -> impl Iterator<Item = [Vec3; 3]> + '_ {
+        let m = self.objects[object].transform;
+        self.object_mesh(object).triangles().map(move |t| t.map(|p| m.transform_point3(p)))
+    }
+
+    /// Faces of every instance at full detail (instances counted each time).
+    pub fn triangle_count(&self) -> u64 {
+        self.objects.iter().map(|o| self.meshes[o.mesh as usize].mesh.triangle_count() as u64).sum()
+    }
+
+    /// Faces of the base meshes (what is stored).
+    pub fn stored_triangle_count(&self) -> u64 {
+        self.meshes.iter().map(|m| m.mesh.triangle_count() as u64).sum()
+    }
+
+    /// Checks the invariants every stage relies on; returns the first violation as one line.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.objects.is_empty() {
+            return Err("scene has no objects".into());
+        }
+        for m in &self.meshes {
+            m.mesh.check().map_err(|r| format!("mesh '{}': {r}", m.name))?;
+        }
+        let mut names = std::collections::HashSet::new();
+        for o in &self.objects {
+            if o.mesh as usize >= self.meshes.len() {
+                return Err(format!("object '{}' refers to mesh {} of {}", o.name, o.mesh, self.meshes.len()));
+            }
+            if !o.transform.is_finite() {
+                return Err(format!("object '{}' has a non-finite transform", o.name));
+            }
+            if !names.insert(o.name.as_str()) {
+                return Err(format!("object name '{}' is not unique", o.name));
+            }
+        }
+        if let Some(g) = &self.grid {
+            g.check()?;
+        }
+        Ok(())
+    }
+}

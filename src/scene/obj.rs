@@ -1,0 +1,5 @@
+//! Wavefront OBJ import (being written).
+use crate::error::{Error, Result};
+pub fn read(path: &std::path::Path) -> Result<super::Scene> {
+    Err(Error::bad_file(path, "OBJ import not yet written"))
+}
