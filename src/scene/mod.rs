@@ -84,16 +84,17 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Loads an OBJ file or a scene manifest (`.json`), chosen by extension.
-    pub fn load(path: &std::path::Path) -> Result<Scene> {
+    /// Loads an OBJ file or a scene manifest (`.json`), chosen by extension, and checks it.
+    /// The second value holds warnings (e.g. skipped empty OBJ groups).
+    pub fn load(path: &std::path::Path) -> Result<(Scene, Vec<String>)> {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        let scene = match ext.as_str() {
-            "json" => manifest::read(path)?,
+        let (scene, warnings) = match ext.as_str() {
+            "json" => (manifest::read(path)?, Vec::new()),
             "obj" => obj::read(path)?,
             _ => return Err(Error::bad_file(path, "unknown scene format: expected .obj or .json (a scene manifest)")),
         };
         scene.check().map_err(|reason| Error::bad_file(path, reason))?;
-        Ok(scene)
+        Ok((scene, warnings))
     }
 
     pub fn object_mesh(&self, object: usize) -> &Mesh {

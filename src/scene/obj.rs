@@ -1,5 +1,114 @@
-//! Wavefront OBJ import (being written).
+//! Wavefront OBJ import: each `o`/`g` group becomes one object (identity transform, its own base
+//! mesh); polygons are triangulated. Materials, normals and texture coordinates are ignored:
+//! visibility needs positions only.
+
+use std::collections::HashMap;
+use std::io::BufReader;
+use std::path::Path;
+
+use glam::Mat4;
+
+use super::{BaseMesh, Mesh, Object, Scene};
 use crate::error::{Error, Result};
-pub fn read(path: &std::path::Path) -> Result<super::Scene> {
-    Err(Error::bad_file(path, "OBJ import not yet written"))
+
+/// Reads an OBJ file. Groups without faces are skipped, each with a warning in the second value.
+pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    // Materials do not matter for visibility; a missing .mtl must not fail the import.
+    let (models, _materials) =
+        tobj::load_obj_buf(&mut BufReader::new(file), &options, |_| Err(tobj::LoadError::MaterialParseError))
+            .map_err(|e| Error::bad_file(path, format!("malformed OBJ: {e}")))?;
+
+    let mut warnings = Vec::new();
+    let mut scene = Scene::default();
+    let mut name_uses: HashMap<String, usize> = HashMap::new();
+    for model in models {
+        let m = model.mesh;
+        let group = if model.name.is_empty() { "unnamed".to_string() } else { model.name };
+        let indices = drop_degenerate(&m.positions, m.indices);
+        if indices.is_empty() {
+            warnings.push(format!("{}: group '{group}' has no faces; skipped", path.display()));
+            continue;
+        }
+        let mesh = Mesh { positions: m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(), indices };
+        mesh.check().map_err(|r| Error::bad_file(path, format!("group '{group}': {r}")))?;
+        // Repeated group names are common in CAD exports; suffixes keep object names unique.
+        let uses = name_uses.entry(group.clone()).or_insert(0);
+        *uses += 1;
+        let name = if *uses == 1 { group } else { format!("{group}#{uses}") };
+        scene.objects.push(Object { name: name.clone(), mesh: scene.meshes.len() as u32, transform: Mat4::IDENTITY });
+        scene.meshes.push(BaseMesh { name, mesh });
+    }
+    if scene.objects.is_empty() {
+        return Err(Error::bad_file(path, "no faces: the OBJ file holds no triangle or polygon"));
+    }
+    Ok((scene, warnings))
+}
+
+/// Removes zero-area triangles: tobj turns 1- and 2-vertex faces into them, and they can never be
+/// seen, so they would only cost draw time.
+fn drop_degenerate(positions: &[f32], indices: Vec<u32>) -> Vec<u32> {
+    let p = |i: u32| glam::Vec3::from_slice(&positions[3 * i as usize..3 * i as usize + 3]);
+    let in_range = |i: u32| (3 * i as usize + 3) <= positions.len();
+    indices
+        .chunks_exact(3)
+        .filter(|t| {
+            // Out-of-range indices are kept so that `Mesh::check` reports them.
+            !t.iter().all(|&i| in_range(i)) || (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])) != glam::Vec3::ZERO
+        })
+        .flatten()
+        .copied()
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.obj");
+        std::fs::write(&p, text).unwrap();
+        (dir, p)
+    }
+
+    #[test]
+    fn groups_become_objects_and_quads_are_triangulated() {
+        let (_d, p) = write(
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+             o a\nf 1 2 3 4\ng b\nf 1 2 3\no a\nf 2 3 4\ng empty\n",
+        );
+        let (scene, warnings) = read(&p).unwrap();
+        let names: Vec<_> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["a", "b", "a#2"]);
+        assert_eq!(scene.object_mesh(0).triangle_count(), 2);
+        assert_eq!(scene.triangle_count(), 4);
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(warnings[0].contains("'empty'"));
+    }
+
+    #[test]
+    fn bad_inputs_are_one_line_errors_naming_the_file() {
+        for (text, reason) in [
+            ("", "no faces"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "out of bounds"),
+            ("v 0 0 zero\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "parse"),
+            ("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite"),
+            ("v 0 0 inf\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite"),
+            ("v 0 0 0\nv 1 0 0\nf 1 2\n", "no faces"),
+        ] {
+            let (_d, p) = write(text);
+            let err = read(&p).err().unwrap_or_else(|| panic!("accepted {text:?}")).to_string();
+            assert!(err.contains("t.obj"), "{err}");
+            assert!(err.contains(reason), "{text:?}: {err}");
+            assert!(!err.contains('\n'), "{err}");
+        }
+    }
+
+    #[test]
+    fn missing_file_is_an_error() {
+        let err = read(Path::new("/nonexistent/x.obj")).unwrap_err().to_string();
+        assert!(err.contains("/nonexistent/x.obj") && err.contains("No such file"), "{err}");
+    }
 }
