@@ -1,1 +1,300 @@
-//! (being written)
+//! Levels of detail with meshoptimizer's simplifiers (`meshopt` crate).
+//!
+//! *Leaf LODs*: per base mesh, a chain from full detail down by a constant ratio (½ by default)
+//! to a few dozen faces, built with the quadric-error simplifier; meshes are welded on position
+//! first because flat-shaded exports repeat every corner and would otherwise not simplify.
+//! *Internal LODs* (thesis §5.6): per tree node, the aggregate of its children's coarsest LODs
+//! (objects' leaf LODs in world space for a leaf node, child nodes' internal LODs above),
+//! simplified with the sloppy simplifier, which handles the merged disjoint parts, so that a
+//! parent's finest LOD has fewer faces than the sum of its children's coarsest.
+//! Every level keeps the simplifier's absolute error (in the mesh's units).
+
+use indicatif::ProgressBar;
+use meshopt::{SimplifyOptions, VertexDataAdapter};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::rtree::RTree;
+use crate::scene::{Mesh, Scene};
+
+/// One level: the simplified mesh and the simplifier's error bound (absolute, mesh units).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LodLevel {
+    pub mesh: Mesh,
+    pub error: f32,
+}
+
+impl LodLevel {
+    pub fn faces(&self) -> usize {
+        self.mesh.triangle_count()
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LodParams {
+    /// Target faces of a level / faces of the level before.
+    pub ratio: f32,
+    /// A chain stops once a level has at most this many faces.
+    pub min_faces: usize,
+}
+
+impl Default for LodParams {
+    fn default() -> Self {
+        Self { ratio: 0.5, min_faces: 32 }
+    }
+}
+
+/// A level counts only if it drops at least this share of the faces of the level before;
+/// below it the simplifier is stuck (e.g. a box cannot lose faces) and the chain ends.
+const MIN_REDUCTION: f32 = 0.1;
+
+/// The LODs of a whole scene.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SceneLods {
+    /// Per base mesh, finest first; level 0 is the welded full mesh (error 0).
+    pub leaf: Vec<Vec<LodLevel>>,
+    /// Per tree node (by node id), finest first, in world space.
+    pub internal: Vec<Vec<LodLevel>>,
+}
+
+/// Builds every leaf and internal LOD. `progress` advances by one per base mesh and per node.
+pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progress: &ProgressBar) -> SceneLods {
+    let leaf: Vec<Vec<LodLevel>> = scene
+        .meshes
+        .par_iter()
+        .map(|m| {
+            let chain = leaf_chain(&m.mesh, params);
+            progress.inc(1);
+            chain
+        })
+        .collect();
+    let mut internal: Vec<Vec<LodLevel>> = vec![Vec::new(); tree.nodes.len()];
+    // Level by level from the leaves up: a node needs its children's chains.
+    for level in 0..tree.height() {
+        let ids: Vec<usize> = (0..tree.nodes.len()).filter(|&i| tree.nodes[i].level == level).collect();
+        let chains: Vec<(usize, Vec<LodLevel>)> = ids
+            .par_iter()
+            .map(|&id| {
+                let node = &tree.nodes[id];
+                let parts: Vec<Mesh> = node
+                    .entries
+                    .iter()
+                    .map(|e| {
+                        if node.is_leaf() {
+                            let o = &scene.objects[e.child as usize];
+                            let coarsest = leaf[o.mesh as usize].last().expect("chains are never empty");
+                            transformed(&coarsest.mesh, &o.transform)
+                        } else {
+                            coarsest_internal(&internal, e.child as usize).mesh.clone()
+                        }
+                    })
+                    .collect();
+                let chain = aggregate_chain(&parts, params);
+                progress.inc(1);
+                (id, chain)
+            })
+            .collect();
+        for (id, chain) in chains {
+            internal[id] = chain;
+        }
+    }
+    SceneLods { leaf, internal }
+}
+
+/// The coarsest internal LOD of a child node, built in an earlier (lower) level pass.
+fn coarsest_internal(internal: &[Vec<LodLevel>], child: usize) -> &LodLevel {
+    internal[child].last().expect("children are simplified before their parent")
+}
+
+/// The leaf chain of one mesh: full detail, then each level ≈ `ratio` of the one before.
+pub fn leaf_chain(mesh: &Mesh, params: &LodParams) -> Vec<LodLevel> {
+    let full = weld(mesh);
+    let mut chain = vec![LodLevel { mesh: full.clone(), error: 0.0 }];
+    while chain.last().unwrap().faces() > params.min_faces {
+        let prev = chain.last().unwrap();
+        let target = ((prev.faces() as f32 * params.ratio) as usize).max(1);
+        let enough = |l: &LodLevel| l.faces() as f32 <= prev.faces() as f32 * (1.0 - MIN_REDUCTION);
+        // Simplify from the full mesh each time, so errors do not compound across levels. Where
+        // topology stops the quadric simplifier (seams, borders), the sloppy one goes on.
+        let level =
+            simplify(&full, target, false).filter(enough).or_else(|| simplify(&full, target, true).filter(enough));
+        let Some(level) = level else { break };
+        chain.push(level);
+    }
+    chain
+}
+
+/// The internal chain of a node from its children's coarsest meshes (world space). The finest
+/// level has fewer faces than all parts together (when they have more than one face).
+pub fn aggregate_chain(parts: &[Mesh], params: &LodParams) -> Vec<LodLevel> {
+    let merged = weld(&merge(parts));
+    let total = merged.triangle_count();
+    let mut chain: Vec<LodLevel> = Vec::new();
+    let mut target = ((total as f32 * params.ratio) as usize).clamp(1, total.saturating_sub(1).max(1));
+    loop {
+        let Some(level) = simplify(&merged, target, true) else { break };
+        let prev = chain.last().map_or(total, |l| l.faces());
+        if !chain.is_empty() && level.faces() as f32 > prev as f32 * (1.0 - MIN_REDUCTION) {
+            break;
+        }
+        let faces = level.faces();
+        chain.push(level);
+        if faces <= params.min_faces {
+            break;
+        }
+        target = ((faces as f32 * params.ratio) as usize).max(1);
+    }
+    if chain.is_empty() {
+        // Nothing simplifies (a single triangle): the node's LOD is its geometry as it is.
+        chain.push(LodLevel { mesh: merged, error: 0.0 });
+    }
+    chain
+}
+
+/// One simplification to about `target` faces; `sloppy` for merged disjoint parts. The result
+/// is compacted to the vertices it uses. `None` when nothing is left.
+fn simplify(mesh: &Mesh, target: usize, sloppy: bool) -> Option<LodLevel> {
+    let adapter = VertexDataAdapter::new(bytemuck::cast_slice(&mesh.positions), 12, 0).ok()?;
+    let mut error = 0.0f32;
+    let target_indices = target * 3;
+    let mut indices = if sloppy {
+        meshopt::simplify_sloppy(&mesh.indices, &adapter, target_indices, f32::MAX, Some(&mut error))
+    } else {
+        let opts = SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
+        meshopt::simplify(&mesh.indices, &adapter, target_indices, f32::MAX, opts, Some(&mut error))
+    };
+    if indices.is_empty() {
+        return None;
+    }
+    if sloppy {
+        // The sloppy simplifier reports relative error; scale it to mesh units.
+        error *= meshopt::simplify_scale(&adapter);
+    }
+    let positions = meshopt::optimize_vertex_fetch(&mut indices, &mesh.positions);
+    Some(LodLevel { mesh: Mesh { positions, indices }, error })
+}
+
+/// Merges vertices with equal positions, so that the simplifier sees connected surfaces.
+pub fn weld(mesh: &Mesh) -> Mesh {
+    let (count, remap) = meshopt::generate_vertex_remap(&mesh.positions, Some(&mesh.indices));
+    Mesh {
+        positions: meshopt::remap_vertex_buffer(&mesh.positions, count, &remap),
+        indices: meshopt::remap_index_buffer(Some(&mesh.indices), count, &remap),
+    }
+}
+
+fn merge(parts: &[Mesh]) -> Mesh {
+    let mut out = Mesh::default();
+    for p in parts {
+        let base = out.positions.len() as u32;
+        out.positions.extend_from_slice(&p.positions);
+        out.indices.extend(p.indices.iter().map(|i| i + base));
+    }
+    out
+}
+
+pub fn transformed(mesh: &Mesh, m: &glam::Mat4) -> Mesh {
+    Mesh {
+        positions: mesh.positions.iter().map(|p| m.transform_point3((*p).into()).to_array()).collect(),
+        indices: mesh.indices.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A UV sphere of about `2·n²` triangles, flat-shaded (every triangle has its own corners).
+    pub fn sphere(n: usize) -> Mesh {
+        let mut m = Mesh::default();
+        let p = |i: usize, j: usize| {
+            let (t, f) = (std::f32::consts::PI * i as f32 / n as f32, std::f32::consts::TAU * j as f32 / n as f32);
+            [t.sin() * f.cos(), t.cos(), t.sin() * f.sin()]
+        };
+        for i in 0..n {
+            for j in 0..n {
+                for tri in [[p(i, j), p(i + 1, j), p(i + 1, j + 1)], [p(i, j), p(i + 1, j + 1), p(i, j + 1)]] {
+                    let b = m.positions.len() as u32;
+                    m.positions.extend(tri);
+                    m.indices.extend([b, b + 1, b + 2]);
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn leaf_chain_is_monotone_and_ends_small() {
+        let chain = leaf_chain(&sphere(60), &LodParams::default());
+        assert!(chain.len() >= 5, "{} levels", chain.len());
+        assert_eq!(chain[0].error, 0.0);
+        for w in chain.windows(2) {
+            assert!(w[1].faces() < w[0].faces(), "faces must fall: {} then {}", w[0].faces(), w[1].faces());
+            assert!(w[1].error >= w[0].error, "error must not fall: {} then {}", w[0].error, w[1].error);
+            w[1].mesh.check().unwrap();
+        }
+        let faces: Vec<usize> = chain.iter().map(|l| l.faces()).collect();
+        assert!(chain.last().unwrap().faces() <= 64, "{faces:?}");
+        // Errors are absolute: a coarse sphere of radius 1 deviates by a sizeable fraction of it.
+        assert!(chain.last().unwrap().error > 0.01 && chain.last().unwrap().error < 1.0);
+    }
+
+    #[test]
+    fn aggregate_finest_is_below_the_sum_of_parts() {
+        let parts: Vec<Mesh> = (0..6)
+            .map(|i| {
+                transformed(
+                    &leaf_chain(&sphere(12), &LodParams::default()).pop().unwrap().mesh,
+                    &glam::Mat4::from_translation(glam::Vec3::X * 3.0 * i as f32),
+                )
+            })
+            .collect();
+        let sum: usize = parts.iter().map(|p| p.triangle_count()).sum();
+        let chain = aggregate_chain(&parts, &LodParams::default());
+        assert!(chain[0].faces() < sum, "{} !< {sum}", chain[0].faces());
+        for w in chain.windows(2) {
+            assert!(w[1].faces() < w[0].faces());
+        }
+    }
+
+    #[test]
+    fn scene_lods_respect_the_parent_rule() {
+        use crate::scene::{BaseMesh, Object};
+        let scene = Scene {
+            meshes: vec![BaseMesh { name: "s".into(), mesh: sphere(16) }],
+            objects: (0..40)
+                .map(|i| Object {
+                    name: format!("o{i}"),
+                    mesh: 0,
+                    transform: glam::Mat4::from_translation(glam::Vec3::new(
+                        (i % 8) as f32 * 3.0,
+                        0.0,
+                        (i / 8) as f32 * 3.0,
+                    )),
+                })
+                .collect(),
+            grid: None,
+        };
+        let tree = RTree::build(&scene.all_object_bounds(), 4, crate::rtree::TreeAlgorithm::Str);
+        let lods = build_scene_lods(&scene, &tree, &LodParams::default(), &ProgressBar::hidden());
+        assert_eq!(lods.leaf.len(), 1, "instanced geometry is simplified once");
+        for (id, node) in tree.nodes.iter().enumerate() {
+            let children: usize = node
+                .entries
+                .iter()
+                .map(|e| {
+                    if node.is_leaf() {
+                        lods.leaf[0].last().unwrap().faces()
+                    } else {
+                        lods.internal[e.child as usize].last().unwrap().faces()
+                    }
+                })
+                .sum();
+            assert!(
+                lods.internal[id][0].faces() < children,
+                "node {id}: {} !< {children}",
+                lods.internal[id][0].faces()
+            );
+        }
+    }
+}
