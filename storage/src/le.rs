@@ -19,3 +19,9 @@ pub(crate) fn tag_str(tag: &[u8]) -> String {
         .map(char::from)
         .collect()
 }
+
+pub(crate) fn u16_at(b: &[u8], at: usize) -> Option<u16> {
+    Some(u16::from_le_bytes(
+        b.get(at..at.checked_add(2)?)?.try_into().ok()?,
+    ))
+}
