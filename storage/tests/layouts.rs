@@ -1,0 +1,305 @@
+//! The three layouts return the same V-pages, equal to the input (bit-exact with f32 DoVs,
+//! within the stated bound with log-u16), and read the pages their design says they read.
+
+use std::path::Path;
+
+use hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE;
+use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
+use hdov_storage::vpage::LOG_DOV_REL_ERROR;
+use hdov_storage::{
+    DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, VEntry, write_layout,
+};
+use proptest::prelude::*;
+
+fn write_all(dir: &Path, data: &VData, opts: &LayoutOptions) {
+    for kind in LayoutKind::ALL {
+        write_layout(dir, kind, data, opts).unwrap();
+    }
+}
+
+/// The input's V-page for (cell, node), all-zero pages counting as hidden.
+fn expected(data: &VData, cell: usize, node: u32) -> Option<&[VEntry]> {
+    let c = &data.cells[cell];
+    let i = c.binary_search_by_key(&node, |(n, _)| *n).ok()?;
+    let e = &c[i].1;
+    (!e.iter().all(VEntry::is_zero)).then_some(&e[..])
+}
+
+fn check_equal(got: &[VEntry], want: &[VEntry], codec: DovCodec) {
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(want) {
+        assert_eq!(g.nvo, w.nvo);
+        match codec {
+            DovCodec::F32 => assert_eq!(g.dov.to_bits(), w.dov.to_bits()),
+            DovCodec::LogU16 => {
+                if w.dov == 0.0 {
+                    assert_eq!(g.dov, 0.0);
+                } else {
+                    assert!(g.dov > 0.0, "visible entry became hidden");
+                    let min = hdov_storage::vpage::LOG_DOV_MIN as f32;
+                    let w_dov = w.dov.clamp(min, 1.0);
+                    assert!(
+                        (g.dov - w_dov).abs() <= w_dov * LOG_DOV_REL_ERROR,
+                        "{} stored as {}",
+                        w.dov,
+                        g.dov
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Reads every (cell, node) from every layout in both read modes and compares with the input.
+fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
+    for kind in LayoutKind::ALL {
+        for mode in [ReadMode::Mmap, ReadMode::Pread] {
+            let mut r = LayoutReader::open(dir, kind, mode).unwrap();
+            assert_eq!(r.cell_count(), data.cell_count);
+            assert_eq!(r.node_count() as usize, data.node_fanout.len());
+            assert_eq!(r.io().pages_read(), 0);
+            let mut buf = Vec::new();
+            for cell in 0..data.cell_count {
+                r.flip_to_cell(cell).unwrap();
+                for node in 0..data.node_fanout.len() as u32 {
+                    let want = expected(data, cell as usize, node);
+                    let visible = r.vpage_into(node, &mut buf).unwrap();
+                    assert_eq!(visible, want.is_some(), "{kind} cell {cell} node {node}");
+                    if let Some(want) = want {
+                        check_equal(&buf, want, codec);
+                    } else {
+                        assert!(buf.is_empty());
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn arb_vdata() -> impl Strategy<Value = VData> {
+    (1u32..6, prop::collection::vec(0u16..40, 1..12)).prop_flat_map(|(cells, fanout)| {
+        let nodes = fanout.len();
+        let entry = (
+            prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6],
+            prop_oneof![0u32..10, Just(70_000u32)],
+        );
+        let page = |f: u16| prop::collection::vec(entry.clone(), f as usize);
+        let per_node: Vec<_> = fanout
+            .iter()
+            .map(|&f| prop::option::weighted(0.5, page(f)))
+            .collect();
+        let cell = per_node;
+        (
+            Just(cells),
+            Just(fanout.clone()),
+            prop::collection::vec(cell, cells as usize),
+            Just(nodes),
+        )
+            .prop_map(|(cells, fanout, raw, _)| VData {
+                cell_count: cells,
+                node_fanout: fanout,
+                cells: raw
+                    .into_iter()
+                    .map(|c| {
+                        c.into_iter()
+                            .enumerate()
+                            .filter_map(|(n, p)| {
+                                p.map(|p| {
+                                    let e = p.into_iter().map(|(dov, nvo)| VEntry { dov, nvo });
+                                    (n as u32, e.collect())
+                                })
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn layouts_agree_with_input(
+        data in arb_vdata(),
+        page_size in prop_oneof![Just(64u32), Just(100), Just(4096)],
+        quantise in any::<bool>(),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let dov = if quantise { DovCodec::LogU16 } else { DovCodec::F32 };
+        write_all(dir.path(), &data, &LayoutOptions { page_size, dov });
+        check_layouts(dir.path(), &data, dov);
+    }
+}
+
+#[test]
+fn synthetic_round_trip_small_pages() {
+    // Page size 64: many V-pages span pages, many segments too.
+    let data = synthetic_vdata(&SyntheticSpec {
+        cells: 7,
+        fanout: 9,
+        levels: 3,
+        ..Default::default()
+    });
+    assert!(data.stats().visible_total > 0);
+    for dov in [DovCodec::F32, DovCodec::LogU16] {
+        for page_size in [64, 4096] {
+            let dir = tempfile::tempdir().unwrap();
+            write_all(dir.path(), &data, &LayoutOptions { page_size, dov });
+            check_layouts(dir.path(), &data, dov);
+        }
+    }
+}
+
+#[test]
+fn flip_costs_follow_the_design() {
+    // 1 + 32 + 32^2 = 1057 nodes; a vertical segment is 6342 bytes = 2 pages of 4 KiB.
+    let data = synthetic_vdata(&SyntheticSpec {
+        cells: 20,
+        fanout: 32,
+        levels: 3,
+        reach: 0.05,
+        visible_share: 0.2,
+        seed: 7,
+    });
+    let dir = tempfile::tempdir().unwrap();
+    write_all(dir.path(), &data, &LayoutOptions::default());
+    let stats = data.stats();
+    for kind in LayoutKind::ALL {
+        let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).unwrap();
+        let s = r.summary();
+        assert_eq!(s.visible_nodes_max, stats.visible_max);
+        for cell in [3u32, 11, 0, 19] {
+            let cost = r.flip_to_cell(cell).unwrap();
+            let visible = data.cells[cell as usize].len() as u64;
+            match kind {
+                LayoutKind::Horizontal => assert_eq!(cost.pages_read, 0),
+                LayoutKind::Vertical => assert_eq!(cost.pages_read, 2),
+                // 10 bytes per visible node, at most one page here.
+                LayoutKind::IndexedVertical => {
+                    assert_eq!(
+                        cost.pages_read,
+                        u64::from(visible > 0) * (visible * 10).div_ceil(4092)
+                    )
+                }
+            }
+            assert!(cost.pages_read <= u64::from(s.flip_pages_max));
+            assert_eq!(
+                r.flip_to_cell(cell).unwrap().pages_read,
+                0,
+                "same cell is free"
+            );
+        }
+        // Reading every visible V-page of a cell in dfs order: vertical layouts read each page
+        // of the cell's run once; horizontal reads one page per visible node.
+        r.flip_to_cell(5).unwrap();
+        r.reset_io();
+        let visible: Vec<u32> = data.cells[5].iter().map(|(n, _)| *n).collect();
+        for &n in &visible {
+            assert!(r.vpage(n).unwrap().is_some());
+        }
+        let vp_file = kind.file_names().last().unwrap();
+        let pages = r.io().file(vp_file);
+        match kind {
+            LayoutKind::Horizontal => assert_eq!(pages, visible.len() as u64),
+            _ => {
+                let bytes = visible.len() as u64 * 32 * 6;
+                assert!(pages <= bytes.div_ceil(4092) + 1, "{kind}: {pages} pages");
+            }
+        }
+    }
+}
+
+#[test]
+fn sizes_rank_as_in_the_thesis() {
+    let data = synthetic_vdata(&SyntheticSpec {
+        cells: 30,
+        fanout: 16,
+        levels: 3,
+        ..Default::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let size = |kind, dov| {
+        let d = dir.path().join(format!("{kind}-{dov}"));
+        std::fs::create_dir(&d).unwrap();
+        let s = write_layout(
+            &d,
+            kind,
+            &data,
+            &LayoutOptions {
+                dov,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let on_disk: u64 = s
+            .files
+            .iter()
+            .map(|(f, b)| {
+                assert_eq!(std::fs::metadata(d.join(f)).unwrap().len(), *b);
+                b
+            })
+            .sum();
+        assert_eq!(on_disk, s.total_bytes());
+        s.total_bytes()
+    };
+    let h = size(LayoutKind::Horizontal, DovCodec::F32);
+    let v = size(LayoutKind::Vertical, DovCodec::F32);
+    let iv = size(LayoutKind::IndexedVertical, DovCodec::F32);
+    assert!(
+        h > v && v > iv,
+        "horizontal {h}, vertical {v}, indexed {iv}"
+    );
+    let iv_q = size(LayoutKind::IndexedVertical, DovCodec::LogU16);
+    assert!(iv_q < iv);
+}
+
+#[test]
+fn misuse_is_an_error() {
+    let data = synthetic_vdata(&SyntheticSpec {
+        cells: 3,
+        fanout: 4,
+        levels: 2,
+        ..Default::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    write_all(dir.path(), &data, &LayoutOptions::default());
+    for kind in LayoutKind::ALL {
+        let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).unwrap();
+        assert!(
+            matches!(r.vpage(0), Err(Error::Invalid { .. })),
+            "before any flip"
+        );
+        assert!(r.flip_to_cell(3).is_err());
+        r.flip_to_cell(2).unwrap();
+        assert!(r.vpage(5).is_err());
+        // Another layout's directory is not this one.
+        let other = tempfile::tempdir().unwrap();
+        assert!(matches!(
+            LayoutReader::open(other.path(), kind, ReadMode::Mmap),
+            Err(Error::Io { .. })
+        ));
+    }
+    let mut bad = data.clone();
+    bad.cell_count = 4;
+    assert!(matches!(
+        write_layout(
+            dir.path(),
+            LayoutKind::Vertical,
+            &bad,
+            &LayoutOptions::default()
+        ),
+        Err(Error::Invalid { .. })
+    ));
+    let opts = LayoutOptions {
+        page_size: MAX_LAYOUT_PAGE_SIZE * 2,
+        ..Default::default()
+    };
+    assert!(write_layout(dir.path(), LayoutKind::Vertical, &data, &opts).is_err());
+    assert_eq!(
+        "indexed-vertical".parse::<LayoutKind>(),
+        Ok(LayoutKind::IndexedVertical)
+    );
+    assert_eq!(LayoutKind::Vertical.to_string(), "vertical");
+    assert!("diagonal".parse::<LayoutKind>().is_err());
+}
