@@ -20,6 +20,43 @@ impl ViewGrid {
         Self { region, dims }
     }
 
+    /// The grid a build uses. Region: `region`, else the scene's own grid's, else the footprint
+    /// of `bounds` at eye height (1.5–2.0 above its lowest point). Cells: `dims`, else
+    /// `cell_size` (one height layer), else the scene grid's dims, else 16 along the longer
+    /// horizontal axis.
+    pub fn resolve(
+        bounds: Aabb,
+        scene_grid: Option<ViewGrid>,
+        region: Option<Aabb>,
+        dims: Option<[u32; 3]>,
+        cell_size: Option<f32>,
+    ) -> Result<ViewGrid, String> {
+        let region = region.or(scene_grid.map(|g| g.region)).unwrap_or_else(|| {
+            let y = bounds.min.y;
+            Aabb::new(Vec3::new(bounds.min.x, y + 1.5, bounds.min.z), Vec3::new(bounds.max.x, y + 2.0, bounds.max.z))
+        });
+        let e = region.extent();
+        let dims = match (dims, cell_size) {
+            (Some(d), _) => d,
+            (None, Some(s)) if s > 0.0 && s.is_finite() => {
+                let n = |x: f32| ((x / s).ceil() as u32).max(1);
+                [n(e.x), 1, n(e.z)]
+            }
+            (None, Some(s)) => return Err(format!("--cell-size {s} must be a positive length")),
+            (None, None) => match scene_grid {
+                Some(g) if g.region == region => g.dims,
+                _ => {
+                    let s = e.x.max(e.z) / 16.0;
+                    let n = |x: f32| if s > 0.0 { ((x / s).round() as u32).max(1) } else { 1 };
+                    [n(e.x), 1, n(e.z)]
+                }
+            },
+        };
+        let g = ViewGrid::new(region, dims);
+        g.check()?;
+        Ok(g)
+    }
+
     pub fn check(&self) -> Result<(), String> {
         let r = self.region;
         if !(r.min.is_finite() && r.max.is_finite()) || r.min.cmpgt(r.max).any() {

@@ -5,12 +5,14 @@
 //! directory, with V-pages written by the `hdov-storage` crate).
 
 pub mod city;
+pub mod cli;
 pub mod db;
 pub mod dov;
 pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod lod;
+pub mod progress;
 pub mod rtree;
 pub mod scene;
 

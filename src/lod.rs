@@ -127,7 +127,7 @@ pub fn leaf_chain(mesh: &Mesh, params: &LodParams) -> Vec<LodLevel> {
 /// The internal chain of a node from its children's coarsest meshes (world space). The finest
 /// level has fewer faces than all parts together (when they have more than one face).
 pub fn aggregate_chain(parts: &[Mesh], params: &LodParams) -> Vec<LodLevel> {
-    let merged = weld(&merge(parts));
+    let merged = weld(&Mesh::merged(parts));
     let total = merged.triangle_count();
     let mut chain: Vec<LodLevel> = Vec::new();
     let mut target = ((total as f32 * params.ratio) as usize).clamp(1, total.saturating_sub(1).max(1));
@@ -181,16 +181,6 @@ pub fn weld(mesh: &Mesh) -> Mesh {
         positions: meshopt::remap_vertex_buffer(&mesh.positions, count, &remap),
         indices: meshopt::remap_index_buffer(Some(&mesh.indices), count, &remap),
     }
-}
-
-fn merge(parts: &[Mesh]) -> Mesh {
-    let mut out = Mesh::default();
-    for p in parts {
-        let base = out.positions.len() as u32;
-        out.positions.extend_from_slice(&p.positions);
-        out.indices.extend(p.indices.iter().map(|i| i + base));
-    }
-    out
 }
 
 pub fn transformed(mesh: &Mesh, m: &glam::Mat4) -> Mesh {

@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 use glam::Mat4;
 use serde::{Deserialize, Serialize};
 
+use hdov_storage::{BlobFile, BlobWriter};
+
 use super::{BaseMesh, Mesh, Object, Scene};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
@@ -16,8 +18,8 @@ use crate::grid::ViewGrid;
 /// `"format"` value of a scene manifest.
 pub const FORMAT: &str = "hdov-scene";
 pub const VERSION: u32 = 1;
-/// First bytes of the geometry sidecar.
-const MESHES_MAGIC: &[u8; 8] = b"HDOVMESH";
+/// Storage kind tag of the geometry sidecar (a blob file, one bincode record per mesh).
+pub const MESHES_KIND: [u8; 4] = *b"MESH";
 
 #[derive(Serialize, Deserialize)]
 struct ManifestFile {
@@ -69,16 +71,13 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
             .collect(),
         grid: scene.grid,
     };
-    let meshes: Vec<&Mesh> = scene.meshes.iter().map(|m| &m.mesh).collect();
-    let payload = bincode::serde::encode_to_vec(&meshes, bincode::config::standard())
-        .map_err(|e| Error::bad_file(&meshes_path, format!("encoding meshes: {e}")))?;
-    let mut bytes = Vec::with_capacity(payload.len() + 24);
-    bytes.extend_from_slice(MESHES_MAGIC);
-    bytes.extend_from_slice(&VERSION.to_le_bytes());
-    bytes.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
-    bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    bytes.extend_from_slice(&payload);
-    std::fs::write(&meshes_path, bytes).map_err(|e| Error::io(&meshes_path, e))?;
+    let mut blobs = BlobWriter::create(&meshes_path, MESHES_KIND)?;
+    for m in &scene.meshes {
+        let bytes = bincode::serde::encode_to_vec(&m.mesh, bincode::config::standard())
+            .map_err(|e| Error::bad_file(&meshes_path, format!("encoding mesh '{}': {e}", m.name)))?;
+        blobs.append(&bytes)?;
+    }
+    blobs.finish()?;
     let json = serde_json::to_vec_pretty(&manifest).map_err(|e| Error::bad_file(path, e.to_string()))?;
     std::fs::write(path, json).map_err(|e| Error::io(path, e))
 }
@@ -117,27 +116,17 @@ pub fn read(path: &Path) -> Result<Scene> {
     Ok(scene)
 }
 
+/// Reads every mesh record of the sidecar, each checked (magic, version, length, crc32).
 fn read_meshes(path: &Path) -> Result<Vec<Mesh>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    if bytes.len() < 24 || &bytes[..8] != MESHES_MAGIC {
-        return Err(Error::bad_file(path, "not an hdov mesh file (bad magic)"));
-    }
-    let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap());
-    if version != VERSION {
-        return Err(Error::bad_file(path, format!("mesh file version {version} (this hdov reads {VERSION})")));
-    }
-    let crc = u32::from_le_bytes(bytes[12..16].try_into().unwrap());
-    let len = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
-    let payload = &bytes[24..];
-    if payload.len() as u64 != len {
-        return Err(Error::bad_file(path, format!("truncated: {} of {len} payload bytes", payload.len())));
-    }
-    if crc32fast::hash(payload) != crc {
-        return Err(Error::bad_file(path, "checksum mismatch: the file is corrupted"));
-    }
-    let (meshes, _) = bincode::serde::decode_from_slice(payload, bincode::config::standard())
-        .map_err(|e| Error::bad_file(path, format!("decoding meshes: {e}")))?;
-    Ok(meshes)
+    let file = BlobFile::open(path, MESHES_KIND)?;
+    file.iter()
+        .map(|record| {
+            let (_, bytes) = record?;
+            let (mesh, _) = bincode::serde::decode_from_slice(bytes, bincode::config::standard())
+                .map_err(|e| Error::bad_file(path, format!("decoding a mesh: {e}")))?;
+            Ok(mesh)
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -176,7 +165,8 @@ mod tests {
         let mut flipped = good.clone();
         *flipped.last_mut().unwrap() ^= 0x40;
         std::fs::write(&mp, &flipped).unwrap();
-        assert!(read(&p).unwrap_err().to_string().contains("checksum"));
+        let err = read(&p).unwrap_err().to_string();
+        assert!(err.contains("checksum") && err.contains("s.meshes"), "{err}");
         std::fs::write(&mp, &good[..good.len() - 3]).unwrap();
         assert!(read(&p).unwrap_err().to_string().contains("truncated"));
         std::fs::write(&mp, b"garbage").unwrap();

@@ -41,6 +41,17 @@ impl Mesh {
         })
     }
 
+    /// One mesh holding all `parts` (indices shifted).
+    pub fn merged(parts: &[Mesh]) -> Mesh {
+        let mut out = Mesh::default();
+        for p in parts {
+            let base = out.positions.len() as u32;
+            out.positions.extend_from_slice(&p.positions);
+            out.indices.extend(p.indices.iter().map(|i| i + base));
+        }
+        out
+    }
+
     /// Checks what every consumer relies on: finite coordinates, whole triangles, indices in range.
     /// Returns the reason of the first violation.
     pub fn check(&self) -> std::result::Result<(), String> {

@@ -1,0 +1,122 @@
+//! Writing a database: tree, LODs and (in later stages) visibility, all into a temporary
+//! directory that becomes the database only when every file is complete and synced.
+
+use std::path::Path;
+use std::time::Instant;
+
+use hdov_storage::{BlobWriter, DirTxn, PageFileWriter};
+
+use super::catalog::{Catalog, LodRef, ObjectRecord};
+use super::tree_page::{self, NodePage};
+use super::*;
+use crate::lod::{LodLevel, build_scene_lods};
+use crate::progress::Progress;
+use crate::rtree::RTree;
+use crate::scene::Scene;
+
+/// What a build did and how long each stage took.
+#[derive(Clone, Debug, Serialize)]
+pub struct BuildReport {
+    pub manifest: Manifest,
+    pub tree_seconds: f64,
+    pub lod_seconds: f64,
+    pub write_seconds: f64,
+}
+
+/// Builds the database for `scene` at `out`. Refuses an existing `out` unless `force`; on any
+/// error the target is left as it was.
+pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progress: &Progress) -> Result<BuildReport> {
+    scene.check().map_err(|r| Error::bad_arg("scene", r))?;
+    let fanout = tree_page::fanout(params.page_size);
+    if fanout < 2 || params.page_size > hdov_storage::pagefile::MAX_PAGE_SIZE {
+        return Err(Error::bad_arg(
+            "--page-size",
+            format!("{} bytes holds {fanout} entries; a node needs at least 2", params.page_size),
+        ));
+    }
+    // Claim the target first: a refusal must come before minutes of work, not after.
+    let txn = DirTxn::begin(out, force)?;
+
+    let t = Instant::now();
+    let boxes = scene.all_object_bounds();
+    let tree = RTree::build(&boxes, fanout, params.tree);
+    let tree_seconds = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let bar = progress.bar("LODs", (scene.meshes.len() + tree.nodes.len()) as u64);
+    let lods = build_scene_lods(scene, &tree, &params.lod, &bar);
+    bar.finish_and_clear();
+    let lod_seconds = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let dir = txn.path().to_path_buf();
+    let mut geometry = BlobWriter::create(&dir.join(GEOMETRY_FILE), GEOMETRY_KIND)?;
+    let mut store_chain = |chain: &[LodLevel]| -> Result<Vec<LodRef>> {
+        chain
+            .iter()
+            .map(|level| {
+                let bytes = bincode::serde::encode_to_vec(&level.mesh, bincode::config::standard())
+                    .map_err(|e| Error::bad_arg("geometry", e.to_string()))?;
+                let r = geometry.append(&bytes)?;
+                Ok(LodRef { faces: level.faces() as u32, error: level.error, offset: r.offset, len: r.len })
+            })
+            .collect()
+    };
+    let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
+    let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
+    geometry.finish()?;
+
+    let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, params.page_size)?;
+    let objects_under = tree.subtree_object_counts();
+    let leaves_under = tree.subtree_leaf_counts();
+    for (id, node) in tree.nodes.iter().enumerate() {
+        let page =
+            NodePage { node: node.clone(), subtree_objects: objects_under[id], subtree_leaves: leaves_under[id] };
+        pages.push(&tree_page::encode(&page))?;
+    }
+    pages.finish()?;
+
+    let catalog = Catalog {
+        objects: scene
+            .objects
+            .iter()
+            .map(|o| ObjectRecord { name: o.name.clone(), mesh: o.mesh, transform: o.transform.to_cols_array() })
+            .collect(),
+        mesh_names: scene.meshes.iter().map(|m| m.name.clone()).collect(),
+        mesh_lods,
+        node_lods,
+    };
+    let mut cat = BlobWriter::create(&dir.join(CATALOG_FILE), CATALOG_KIND)?;
+    let bytes = bincode::serde::encode_to_vec(&catalog, bincode::config::standard())
+        .map_err(|e| Error::bad_arg("catalog", e.to_string()))?;
+    cat.append(&bytes)?;
+    cat.finish()?;
+
+    let lod_triangles = catalog.mesh_lods.iter().chain(&catalog.node_lods).flatten().map(|l| l.faces as u64).sum();
+    let mut manifest = Manifest {
+        hdov: Manifest::MAGIC.into(),
+        format_version: FORMAT_VERSION,
+        created_by: format!("hdov {}", env!("CARGO_PKG_VERSION")),
+        build: params.clone(),
+        counts: Counts {
+            objects: scene.objects.len() as u64,
+            base_meshes: scene.meshes.len() as u64,
+            triangles: scene.triangle_count(),
+            stored_triangles: scene.stored_triangle_count(),
+            nodes: tree.nodes.len() as u64,
+            cells: scene.grid.map_or(0, |g| g.cell_count() as u64),
+            lod_triangles,
+        },
+        tree: tree.stats(),
+        grid: scene.grid,
+        files: Vec::new(),
+    };
+    for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
+        let bytes = std::fs::metadata(dir.join(name)).map_err(|e| Error::io(dir.join(name), e))?.len();
+        manifest.files.push(FileEntry { name: name.into(), bytes });
+    }
+    let json = serde_json::to_vec_pretty(&manifest).map_err(|e| Error::bad_arg("manifest", e.to_string()))?;
+    hdov_storage::write_file_synced(&dir.join(MANIFEST_FILE), &json)?;
+    txn.commit()?;
+    Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64() })
+}

@@ -1,0 +1,62 @@
+//! The catalog (`catalog.blob`, storage kind `CATL`, one bincode record): objects and where each
+//! LOD level lives in `geometry.blob`. Small enough to keep in memory while a database is open.
+
+use serde::{Deserialize, Serialize};
+
+/// Where one LOD level lives and what it costs to draw.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LodRef {
+    pub faces: u32,
+    /// The simplifier's error bound, in world units for internal LODs and mesh units for leaves.
+    pub error: f32,
+    pub offset: u64,
+    pub len: u32,
+}
+
+impl LodRef {
+    pub fn blob(&self) -> hdov_storage::BlobRef {
+        hdov_storage::BlobRef { offset: self.offset, len: self.len }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectRecord {
+    pub name: String,
+    pub mesh: u32,
+    /// Column-major 4×4.
+    pub transform: [f32; 16],
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Catalog {
+    pub objects: Vec<ObjectRecord>,
+    pub mesh_names: Vec<String>,
+    /// Per base mesh, finest first (level 0 = full detail).
+    pub mesh_lods: Vec<Vec<LodRef>>,
+    /// Per node id, finest first.
+    pub node_lods: Vec<Vec<LodRef>>,
+}
+
+impl Catalog {
+    /// The leaf LOD chain of an object.
+    pub fn object_lods(&self, object: u32) -> &[LodRef] {
+        &self.mesh_lods[self.objects[object as usize].mesh as usize]
+    }
+
+    /// Checks internal consistency; returns the first violation.
+    pub fn check(&self, nodes: usize) -> Result<(), String> {
+        if self.node_lods.len() != nodes {
+            return Err(format!("{} node LOD chains for {nodes} nodes", self.node_lods.len()));
+        }
+        if self.mesh_lods.len() != self.mesh_names.len() {
+            return Err("mesh LOD chains and mesh names differ in number".into());
+        }
+        if let Some(o) = self.objects.iter().find(|o| o.mesh as usize >= self.mesh_lods.len()) {
+            return Err(format!("object '{}' refers to mesh {} of {}", o.name, o.mesh, self.mesh_lods.len()));
+        }
+        if self.mesh_lods.iter().chain(&self.node_lods).any(|c| c.is_empty()) {
+            return Err("an empty LOD chain".into());
+        }
+        Ok(())
+    }
+}
