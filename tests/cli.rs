@@ -1,0 +1,118 @@
+//! The `hdov` command as users and scripts see it: outputs, exit codes, one-line errors.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn hdov(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hdov")).args(args).output().expect("runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Fails unless the command exited non-zero with one `error:` line naming `what`.
+fn assert_refused(o: &Output, what: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.starts_with("error: ") && err.trim_end().lines().count() == 1, "not one line: {err}");
+    assert!(err.contains(what), "'{what}' not in: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn generate_build_info_round_trip() {
+    let tmp = tempfile::tempdir().unwrap();
+    let city = tmp.path().join("city");
+    let o = hdov(&["generate", "city", "--scale", "tiny", "--seed", "7", "--out", city.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = city.join("city.json");
+    let db = tmp.path().join("db");
+    let o = hdov(&["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap(), "--page-size", "512", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("build --json prints one JSON document");
+    assert!(report["manifest"]["counts"]["nodes"].as_u64().unwrap() > 1);
+    let o = hdov(&["info", db.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (loaded, _) = hdov::scene::Scene::load(&scene).unwrap();
+    assert_eq!(info["objects"].as_u64().unwrap() as usize, loaded.objects.len());
+    assert_eq!(info["triangles"].as_u64().unwrap(), loaded.triangle_count());
+    assert_eq!(info["base_meshes"].as_u64().unwrap() as usize, loaded.meshes.len());
+    assert_eq!(info["grid"]["dims"].as_array().unwrap().len(), 3);
+    assert_eq!(info["grid"]["region"].as_array().unwrap().len(), 6);
+    // A second build to the same place is refused, and the first database still opens.
+    let o = hdov(&["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap()]);
+    assert_refused(&o, "--force");
+    assert!(hdov(&["info", db.to_str().unwrap()]).status.success());
+}
+
+#[test]
+fn obj_groups_become_objects() {
+    let tmp = tempfile::tempdir().unwrap();
+    let obj = tmp.path().join("parts.obj");
+    let mut text = String::new();
+    for part in 0..5 {
+        let x = part as f32 * 3.0;
+        text += &format!("g part{part}\nv {x} 0 0\nv {} 0 0\nv {x} 1 0\nv {} 1 0\nf -4 -3 -1 -2\n", x + 1.0, x + 1.0);
+    }
+    text += "g part1\nv 0 0 5\nv 1 0 5\nv 0 1 5\nf -3 -2 -1\ng empty\n";
+    std::fs::write(&obj, text).unwrap();
+    let db = tmp.path().join("db");
+    let o = hdov(&["build", obj.to_str().unwrap(), "--out", db.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("warning:") && stderr(&o).contains("'empty'"), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", db.to_str().unwrap(), "--json"]).stdout).unwrap();
+    assert_eq!(info["objects"], 6);
+    assert_eq!(info["triangles"], 11);
+}
+
+#[test]
+fn bad_input_is_one_line_and_nonzero() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    std::fs::write(p("bad.obj"), "v 0 0 0\nv 1 0 x\nf 1 2 3\n").unwrap();
+    std::fs::write(p("nan.obj"), "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(p("empty.obj"), "").unwrap();
+    std::fs::write(p("scene.txt"), "").unwrap();
+    let out = p("db");
+    assert_refused(&hdov(&["build", &p("missing.obj"), "--out", &out]), "missing.obj");
+    assert_refused(&hdov(&["build", &p("bad.obj"), "--out", &out]), "bad.obj");
+    assert_refused(&hdov(&["build", &p("nan.obj"), "--out", &out]), "non-finite");
+    assert_refused(&hdov(&["build", &p("empty.obj"), "--out", &out]), "empty.obj");
+    assert_refused(&hdov(&["build", &p("scene.txt"), "--out", &out]), "unknown scene format");
+    assert_refused(&hdov(&["info", &p("nowhere")]), "nowhere");
+    assert!(!Path::new(&out).exists(), "a failed build leaves nothing behind");
+    let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(names.iter().all(|n| !n.to_string_lossy().contains("tmp")), "{names:?}");
+}
+
+/// A build killed at any moment leaves the old database intact (or the new one complete): never
+/// a half-written database that opens.
+#[test]
+fn killed_build_leaves_the_old_database() {
+    let tmp = tempfile::tempdir().unwrap();
+    let city = tmp.path().join("city");
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", city.to_str().unwrap()]).status.success());
+    let scene = city.join("city.json");
+    let db = tmp.path().join("db");
+    assert!(hdov(&["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap()]).status.success());
+    let before = std::fs::read(db.join("manifest.json")).unwrap();
+    for delay_ms in [5, 50, 200] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_hdov"))
+            .args(["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap(), "--force", "--page-size", "1024"])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let o = hdov(&["info", db.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "after a kill at {delay_ms} ms: {}", stderr(&o));
+        let now = std::fs::read(db.join("manifest.json")).unwrap();
+        if !status.success() {
+            // Killed before its rename: the old database, byte for byte.
+            assert!(now == before || now.windows(4).any(|w| w == b"1024"), "manifest changed without a complete build");
+        }
+    }
+}

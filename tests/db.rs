@@ -1,0 +1,120 @@
+//! The database directory: round trips of every file, and refusal of damaged ones.
+
+mod common;
+
+use std::path::Path;
+
+use hdov::db::{self, BuildParams, Database};
+use hdov::progress::Progress;
+use hdov::rtree::{RTree, TreeAlgorithm};
+
+fn build(dir: &Path, params: &BuildParams) -> hdov::db::build::BuildReport {
+    let scene = common::town(8);
+    db::build::build(&scene, dir, params, false, &Progress::hidden()).unwrap()
+}
+
+#[test]
+fn tree_pages_and_lods_round_trip() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("db");
+    let params = BuildParams { page_size: 256, ..Default::default() };
+    build(&dir, &params);
+    let scene = common::town(8);
+    let boxes = scene.all_object_bounds();
+    let tree = RTree::build(&boxes, hdov::db::tree_page::fanout(256), TreeAlgorithm::Str);
+    let db = Database::open(&dir).unwrap();
+    assert_eq!(db.node_count() as usize, tree.nodes.len());
+    assert!(tree.height() >= 3, "a 256-byte page makes a deep enough tree to test");
+    for (id, node) in tree.nodes.iter().enumerate() {
+        let page = db.node(id as u32).unwrap();
+        assert_eq!(&page.node, node);
+        assert_eq!(page.subtree_objects as usize, tree.objects_under(id as u32).len());
+    }
+    assert_eq!(db.tree_pages_read(), tree.nodes.len() as u64, "every node read is one counted page");
+    // Instanced geometry is stored once: one chain per base mesh, not per object.
+    assert_eq!(db.catalog.mesh_lods.len(), scene.meshes.len());
+    assert!(db.catalog.objects.len() > scene.meshes.len());
+    let ball = &db.catalog.mesh_lods[0];
+    assert_eq!(ball[0].faces as usize, scene.meshes[0].mesh.triangle_count());
+    for w in ball.windows(2) {
+        assert!(w[1].faces < w[0].faces);
+    }
+    for lod in ball.iter().chain(db.catalog.node_lods.iter().flatten()) {
+        assert_eq!(db.lod_mesh(lod).unwrap().triangle_count(), lod.faces as usize);
+    }
+    let m = &db.manifest;
+    assert_eq!(m.counts.objects as usize, scene.objects.len());
+    assert_eq!(m.counts.triangles, scene.triangle_count());
+}
+
+#[test]
+fn existing_database_is_kept_without_force_and_replaced_with_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("db");
+    build(&dir, &BuildParams::default());
+    let scene = common::town(3);
+    let err = db::build::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
+    assert!(err.to_string().contains("--force"), "{err}");
+    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, common::town(8).objects.len());
+    db::build::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
+    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, scene.objects.len());
+    // No temporary directory is left beside the target.
+    let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 1, "{names:?}");
+}
+
+/// Copies a database and applies `damage` to one of its files.
+fn damaged(src: &Path, file: &str, damage: impl FnOnce(&mut Vec<u8>)) -> tempfile::TempDir {
+    let tmp = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), tmp.path().join(e.file_name())).unwrap();
+    }
+    let p = tmp.path().join(file);
+    let mut bytes = std::fs::read(&p).unwrap();
+    damage(&mut bytes);
+    std::fs::write(&p, bytes).unwrap();
+    tmp
+}
+
+/// Opens and reads everything; returns the first error.
+fn open_and_read_all(dir: &Path) -> hdov::Result<()> {
+    let db = Database::open(dir)?;
+    for id in 0..db.node_count() {
+        db.node(id)?;
+    }
+    for lod in db.catalog.mesh_lods.iter().chain(&db.catalog.node_lods).flatten() {
+        db.lod_mesh(lod)?;
+    }
+    Ok(())
+}
+
+#[test]
+fn damaged_files_are_refused_with_a_clear_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("db");
+    build(&dir, &BuildParams { page_size: 256, ..Default::default() });
+    open_and_read_all(&dir).unwrap();
+    let cases: Vec<(&str, Box<dyn FnOnce(&mut Vec<u8>)>, &str)> = vec![
+        ("tree.pages", Box::new(|b| b[700] ^= 1), "checksum"),
+        ("tree.pages", Box::new(|b| b.truncate(b.len() - 100)), "truncated"),
+        ("tree.pages", Box::new(|b| b[0] = b'X'), "magic"),
+        ("geometry.blob", Box::new(|b| { let n = b.len(); b[n - 5] ^= 0x10 }), "checksum"),
+        ("geometry.blob", Box::new(|b| b.truncate(b.len() / 2)), "truncated"),
+        ("catalog.blob", Box::new(|b| { let n = b.len(); b[n / 2] ^= 0xff }), "checksum"),
+        ("manifest.json", Box::new(|b| *b = String::from_utf8(b.clone()).unwrap().replace("\"format_version\": 1", "\"format_version\": 9").into_bytes()), "version 9"),
+        ("manifest.json", Box::new(|b| b.truncate(b.len() / 2)), "manifest"),
+        ("manifest.json", Box::new(|b| *b = String::from_utf8(b.clone()).unwrap().replace("\"hdov\": \"database\"", "\"hdov\": \"scene\"").into_bytes()), "not a database"),
+    ];
+    for (file, damage, expect) in cases {
+        let bad = damaged(&dir, file, damage);
+        let err = open_and_read_all(bad.path()).expect_err(file).to_string();
+        assert!(err.contains(expect), "{file}: expected '{expect}' in: {err}");
+        assert!(err.contains(file) || file == "manifest.json" && err.contains("manifest"), "{file}: error names no file: {err}");
+        assert!(!err.contains('\n'), "{err}");
+    }
+    let missing = damaged(&dir, "tree.pages", |_| {});
+    std::fs::remove_file(missing.path().join("tree.pages")).unwrap();
+    assert!(open_and_read_all(missing.path()).unwrap_err().to_string().contains("tree.pages"));
+    assert!(Database::open(&tmp.path().join("nope")).err().unwrap().to_string().contains("no such database"));
+}
