@@ -62,7 +62,8 @@ fn obj_groups_become_objects() {
     let o = hdov(&["build", obj.to_str().unwrap(), "--out", db.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("warning:") && stderr(&o).contains("'empty'"), "{}", stderr(&o));
-    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", db.to_str().unwrap(), "--json"]).stdout).unwrap();
+    let info: serde_json::Value =
+        serde_json::from_slice(&hdov(&["info", db.to_str().unwrap(), "--json"]).stdout).unwrap();
     assert_eq!(info["objects"], 6);
     assert_eq!(info["triangles"], 11);
 }
@@ -114,5 +115,59 @@ fn killed_build_leaves_the_old_database() {
             // Killed before its rename: the old database, byte for byte.
             assert!(now == before || now.windows(4).any(|w| w == b"1024"), "manifest changed without a complete build");
         }
+    }
+}
+
+/// Real multi-part OBJ exports from Debian's `assimp-testmodels` (installed by `.ci/run`).
+#[test]
+fn real_multi_part_obj_files_import_one_object_per_group() {
+    let dir = Path::new("/usr/share/assimp/models");
+    if !dir.exists() {
+        assert!(std::env::var_os("HDOV_REQUIRE_TESTDATA").is_none(), "assimp-testmodels is not installed");
+        println!("skipped: no /usr/share/assimp/models (apt-get install assimp-testmodels)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["spider", "regr01"] {
+        let obj = dir.join(format!("OBJ/{name}.obj"));
+        // Independent count: one object per group that has faces, n − 2 fan triangles per
+        // n-gon, less those of zero area (which import drops).
+        let text = String::from_utf8_lossy(&std::fs::read(&obj).unwrap()).into_owned();
+        let (mut groups, mut triangles, mut group_has_faces) = (0u64, 0u64, false);
+        let mut v: Vec<glam::DVec3> = Vec::new();
+        for line in text.lines() {
+            let mut tok = line.split_whitespace();
+            match tok.next() {
+                Some("v") => {
+                    v.push(glam::DVec3::from_slice(&tok.map(|x| x.parse().unwrap()).collect::<Vec<f64>>()[..3]))
+                }
+                Some("g" | "o") => group_has_faces = false,
+                Some("f") => {
+                    let idx: Vec<usize> = tok
+                        .map(|t| t.split('/').next().unwrap().parse::<i64>().unwrap())
+                        .map(|i| if i > 0 { i as usize - 1 } else { (v.len() as i64 + i) as usize })
+                        .collect();
+                    let area = |k: usize| (v[idx[k]] - v[idx[0]]).cross(v[idx[k + 1]] - v[idx[0]]).length();
+                    triangles += (1..idx.len() - 1).filter(|&k| area(k) > 0.0).count() as u64;
+                    if !group_has_faces {
+                        groups += 1;
+                        group_has_faces = true;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let db = tmp.path().join(name);
+        let o = hdov(&["build", obj.to_str().unwrap(), "--out", db.to_str().unwrap()]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let info: serde_json::Value =
+            serde_json::from_slice(&hdov(&["info", db.to_str().unwrap(), "--json"]).stdout).unwrap();
+        assert!(groups > 10, "{name} has many parts");
+        assert_eq!(info["objects"], groups, "{name}");
+        assert_eq!(info["triangles"], triangles, "{name}");
+    }
+    for bad in ["malformed.obj", "malformed2.obj", "empty.obj"] {
+        let obj = dir.join("invalid").join(bad);
+        assert_refused(&hdov(&["build", obj.to_str().unwrap(), "--out", tmp.path().join("x").to_str().unwrap()]), bad);
     }
 }

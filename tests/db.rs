@@ -99,18 +99,53 @@ fn damaged_files_are_refused_with_a_clear_error() {
         ("tree.pages", Box::new(|b| b[700] ^= 1), "checksum"),
         ("tree.pages", Box::new(|b| b.truncate(b.len() - 100)), "truncated"),
         ("tree.pages", Box::new(|b| b[0] = b'X'), "magic"),
-        ("geometry.blob", Box::new(|b| { let n = b.len(); b[n - 5] ^= 0x10 }), "checksum"),
+        (
+            "geometry.blob",
+            Box::new(|b| {
+                let n = b.len();
+                b[n - 5] ^= 0x10
+            }),
+            "checksum",
+        ),
         ("geometry.blob", Box::new(|b| b.truncate(b.len() / 2)), "truncated"),
-        ("catalog.blob", Box::new(|b| { let n = b.len(); b[n / 2] ^= 0xff }), "checksum"),
-        ("manifest.json", Box::new(|b| *b = String::from_utf8(b.clone()).unwrap().replace("\"format_version\": 1", "\"format_version\": 9").into_bytes()), "version 9"),
+        (
+            "catalog.blob",
+            Box::new(|b| {
+                let n = b.len();
+                b[n / 2] ^= 0xff
+            }),
+            "checksum",
+        ),
+        (
+            "manifest.json",
+            Box::new(|b| {
+                *b = String::from_utf8(b.clone())
+                    .unwrap()
+                    .replace("\"format_version\": 1", "\"format_version\": 9")
+                    .into_bytes()
+            }),
+            "version 9",
+        ),
         ("manifest.json", Box::new(|b| b.truncate(b.len() / 2)), "manifest"),
-        ("manifest.json", Box::new(|b| *b = String::from_utf8(b.clone()).unwrap().replace("\"hdov\": \"database\"", "\"hdov\": \"scene\"").into_bytes()), "not a database"),
+        (
+            "manifest.json",
+            Box::new(|b| {
+                *b = String::from_utf8(b.clone())
+                    .unwrap()
+                    .replace("\"hdov\": \"database\"", "\"hdov\": \"scene\"")
+                    .into_bytes()
+            }),
+            "not a database",
+        ),
     ];
     for (file, damage, expect) in cases {
         let bad = damaged(&dir, file, damage);
         let err = open_and_read_all(bad.path()).expect_err(file).to_string();
         assert!(err.contains(expect), "{file}: expected '{expect}' in: {err}");
-        assert!(err.contains(file) || file == "manifest.json" && err.contains("manifest"), "{file}: error names no file: {err}");
+        assert!(
+            err.contains(file) || file == "manifest.json" && err.contains("manifest"),
+            "{file}: error names no file: {err}"
+        );
         assert!(!err.contains('\n'), "{err}");
     }
     let missing = damaged(&dir, "tree.pages", |_| {});

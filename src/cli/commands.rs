@@ -110,7 +110,9 @@ fn generate_city(
     let detail_model = match detail {
         Some(p) => {
             let (s, _) = Scene::load(p)?;
-            let parts: Vec<_> = (0..s.objects.len()).map(|i| crate::lod::transformed(s.object_mesh(i), &s.objects[i].transform)).collect();
+            let parts: Vec<_> = (0..s.objects.len())
+                .map(|i| crate::lod::transformed(s.object_mesh(i), &s.objects[i].transform))
+                .collect();
             Some(crate::scene::Mesh::merged(&parts))
         }
         None => None,
@@ -144,10 +146,18 @@ fn print_build(out: &Path, r: &BuildReport) {
     let c = &r.manifest.counts;
     let t = &r.manifest.tree;
     println!("{}: built", out.display());
-    println!("  objects {} ({} base meshes), triangles {} ({} stored)", c.objects, c.base_meshes, c.triangles, c.stored_triangles);
+    println!(
+        "  objects {} ({} base meshes), triangles {} ({} stored)",
+        c.objects, c.base_meshes, c.triangles, c.stored_triangles
+    );
     println!(
         "  tree {}: {} nodes, {} leaves, height {}, fan-out {}, fill {:.0} %",
-        r.manifest.build.tree, t.nodes, t.leaves, t.height, t.max_entries, t.fill_factor * 100.0
+        r.manifest.build.tree,
+        t.nodes,
+        t.leaves,
+        t.height,
+        t.max_entries,
+        t.fill_factor * 100.0
     );
     println!("  LOD triangles {} (leaf + internal)", c.lod_triangles);
     println!("  time: tree {:.2} s, LODs {:.2} s, write {:.2} s", r.tree_seconds, r.lod_seconds, r.write_seconds);
@@ -178,11 +188,29 @@ pub fn info(a: InfoArgs) -> Result<()> {
         return Ok(());
     }
     println!("{} (format v{}, {})", a.db.display(), m.format_version, m.created_by);
-    println!("  objects {} ({} base meshes), triangles {} ({} stored), LOD triangles {}", c.objects, c.base_meshes, c.triangles, c.stored_triangles, c.lod_triangles);
+    println!(
+        "  objects {} ({} base meshes), triangles {} ({} stored), LOD triangles {}",
+        c.objects, c.base_meshes, c.triangles, c.stored_triangles, c.lod_triangles
+    );
     let t = &m.tree;
-    println!("  tree {}: {} nodes, {} leaves, height {}, fan-out {}, fill {:.0} %", m.build.tree, t.nodes, t.leaves, t.height, t.max_entries, t.fill_factor * 100.0);
+    println!(
+        "  tree {}: {} nodes, {} leaves, height {}, fan-out {}, fill {:.0} %",
+        m.build.tree,
+        t.nodes,
+        t.leaves,
+        t.height,
+        t.max_entries,
+        t.fill_factor * 100.0
+    );
     if let Some(g) = m.grid {
-        println!("  grid {}x{}x{} = {} cells over {:?}", g.dims[0], g.dims[1], g.dims[2], g.cell_count(), g.region.to_array());
+        println!(
+            "  grid {}x{}x{} = {} cells over {:?}",
+            g.dims[0],
+            g.dims[1],
+            g.dims[2],
+            g.cell_count(),
+            g.region.to_array()
+        );
     }
     for f in &m.files {
         println!("  {:<16} {:>12} bytes", f.name, f.bytes);
@@ -195,10 +223,15 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let scene_path = generate_city(&a.out, 1, CityScale::Default, None, None)?;
     let (scene, _) = Scene::load(&scene_path)?;
     let db_path = a.out.join("city.hdov");
-    let report =
-        db::build::build(&scene, &db_path, &BuildParams::default(), true, &Progress::for_terminal(a.json))?;
+    let report = db::build::build(&scene, &db_path, &BuildParams::default(), true, &Progress::for_terminal(a.json))?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()})).expect("serialisable"));
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()})
+            )
+            .expect("serialisable")
+        );
     } else {
         println!("scene: {}", scene_path.display());
         print_build(&db_path, &report);

@@ -135,12 +135,11 @@ impl Database {
         let geometry = BlobFile::open(&dir.join(GEOMETRY_FILE), GEOMETRY_KIND)?;
         let catalog_file = BlobFile::open(&dir.join(CATALOG_FILE), CATALOG_KIND)?;
         let catalog_path = dir.join(CATALOG_FILE);
-        let record = catalog_file
-            .iter()
-            .next()
-            .ok_or_else(|| Error::bad_file(&catalog_path, "holds no catalog record"))??;
-        let (catalog, _): (Catalog, usize) = bincode::serde::decode_from_slice(record.1, bincode::config::standard())
-            .map_err(|e| Error::bad_file(&catalog_path, format!("malformed catalog: {e}")))?;
+        let record =
+            catalog_file.iter().next().ok_or_else(|| Error::bad_file(&catalog_path, "holds no catalog record"))??;
+        let (catalog, _): (Catalog, usize) =
+            bincode::serde::decode_from_slice(record.1, bincode::config::standard())
+                .map_err(|e| Error::bad_file(&catalog_path, format!("malformed catalog: {e}")))?;
         let nodes = manifest.counts.nodes;
         if tree.page_count() != nodes {
             return Err(Error::bad_file(

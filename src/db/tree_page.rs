@@ -35,7 +35,8 @@ pub struct NodePage {
 pub fn encode(page: &NodePage) -> Vec<u8> {
     let n = &page.node;
     let mut out = Vec::with_capacity(NODE_HEADER_LEN + ENTRY_LEN * n.entries.len());
-    for v in [n.level, n.parent.unwrap_or(u32::MAX), n.entries.len() as u32, page.subtree_objects, page.subtree_leaves] {
+    for v in [n.level, n.parent.unwrap_or(u32::MAX), n.entries.len() as u32, page.subtree_objects, page.subtree_leaves]
+    {
         out.extend_from_slice(&v.to_le_bytes());
     }
     out.resize(NODE_HEADER_LEN, 0);

@@ -13,12 +13,15 @@ use crate::error::{Error, Result};
 
 /// Reads an OBJ file. Groups without faces are skipped, each with a warning in the second value.
 pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    // Exporters write group names in legacy 8-bit encodings; tobj needs UTF-8 lines.
+    let text = String::from_utf8_lossy(&bytes);
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // Materials do not matter for visibility; a missing .mtl must not fail the import.
-    let (models, _materials) =
-        tobj::load_obj_buf(&mut BufReader::new(file), &options, |_| Err(tobj::LoadError::MaterialParseError))
-            .map_err(|e| Error::bad_file(path, format!("malformed OBJ: {e}")))?;
+    let (models, _materials) = tobj::load_obj_buf(&mut BufReader::new(text.as_bytes()), &options, |_| {
+        Err(tobj::LoadError::MaterialParseError)
+    })
+    .map_err(|e| Error::bad_file(path, format!("malformed OBJ: {e}")))?;
 
     let mut warnings = Vec::new();
     let mut scene = Scene::default();

@@ -46,9 +46,7 @@ impl DirTxn {
     /// missing). Refuses when `target` exists and `force` is false.
     pub fn begin(target: &Path, force: bool) -> Result<Self> {
         if exists(target) && !force {
-            return Err(Error::Exists {
-                path: path_str(target),
-            });
+            return Err(Error::Exists { path: path_str(target) });
         }
         let (parent, name) = split_target(target)?;
         fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
@@ -58,12 +56,7 @@ impl DirTxn {
             fs::remove_dir_all(&temp).map_err(|e| Error::io(&temp, e))?;
         }
         fs::create_dir(&temp).map_err(|e| Error::io(&temp, e))?;
-        Ok(Self {
-            target: target.to_path_buf(),
-            temp,
-            force,
-            committed: false,
-        })
+        Ok(Self { target: target.to_path_buf(), temp, force, committed: false })
     }
 
     /// The temporary directory to write into.
@@ -83,9 +76,7 @@ impl DirTxn {
         let (parent, name) = split_target(&self.target)?;
         let old = if exists(&self.target) {
             if !self.force {
-                return Err(Error::Exists {
-                    path: path_str(&self.target),
-                });
+                return Err(Error::Exists { path: path_str(&self.target) });
             }
             let old = parent.join(format!(".{name}.old-{}", std::process::id()));
             if exists(&old) {
@@ -118,18 +109,11 @@ impl Drop for DirTxn {
 
 fn remove_any(path: &Path) -> Result<()> {
     let meta = fs::symlink_metadata(path).map_err(|e| Error::io(path, e))?;
-    if meta.is_dir() {
-        fs::remove_dir_all(path)
-    } else {
-        fs::remove_file(path)
-    }
-    .map_err(|e| Error::io(path, e))
+    if meta.is_dir() { fs::remove_dir_all(path) } else { fs::remove_file(path) }.map_err(|e| Error::io(path, e))
 }
 
 fn sync_dir(dir: &Path) -> Result<()> {
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(|e| Error::io(dir, e))
+    File::open(dir).and_then(|d| d.sync_all()).map_err(|e| Error::io(dir, e))
 }
 
 fn sync_tree(dir: &Path) -> Result<()> {
@@ -140,9 +124,7 @@ fn sync_tree(dir: &Path) -> Result<()> {
         if ty.is_dir() {
             sync_tree(&path)?;
         } else if ty.is_file() {
-            File::open(&path)
-                .and_then(|f| f.sync_all())
-                .map_err(|e| Error::io(&path, e))?;
+            File::open(&path).and_then(|f| f.sync_all()).map_err(|e| Error::io(&path, e))?;
         }
     }
     sync_dir(dir)

@@ -50,36 +50,19 @@ impl BlobWriter {
     pub fn create(path: &Path, kind: [u8; 4]) -> Result<Self> {
         let file = File::create(path).map_err(|e| Error::io(path, e))?;
         let mut file = std::io::BufWriter::with_capacity(1 << 16, file);
-        file.write_all(&[0u8; BLOB_HEADER_LEN])
-            .map_err(|e| Error::io(path, e))?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            file,
-            kind,
-            end: BLOB_HEADER_LEN as u64,
-            count: 0,
-        })
+        file.write_all(&[0u8; BLOB_HEADER_LEN]).map_err(|e| Error::io(path, e))?;
+        Ok(Self { path: path.to_path_buf(), file, kind, end: BLOB_HEADER_LEN as u64, count: 0 })
     }
 
     /// Appends one record; returns where it is.
     pub fn append(&mut self, bytes: &[u8]) -> Result<BlobRef> {
-        let len = u32::try_from(bytes.len())
-            .map_err(|_| Error::invalid(&self.path, "record longer than 4 GiB"))?;
-        let count = self
-            .count
-            .checked_add(1)
-            .ok_or_else(|| Error::invalid(&self.path, "more than 2^32 records"))?;
+        let len = u32::try_from(bytes.len()).map_err(|_| Error::invalid(&self.path, "record longer than 4 GiB"))?;
+        let count = self.count.checked_add(1).ok_or_else(|| Error::invalid(&self.path, "more than 2^32 records"))?;
         let mut head = [0u8; RECORD_HEADER_LEN];
         head[0..4].copy_from_slice(&len.to_le_bytes());
         head[4..8].copy_from_slice(&crc32fast::hash(bytes).to_le_bytes());
-        self.file
-            .write_all(&head)
-            .and_then(|()| self.file.write_all(bytes))
-            .map_err(|e| Error::io(&self.path, e))?;
-        let r = BlobRef {
-            offset: self.end,
-            len,
-        };
+        self.file.write_all(&head).and_then(|()| self.file.write_all(bytes)).map_err(|e| Error::io(&self.path, e))?;
+        let r = BlobRef { offset: self.end, len };
         self.end += (RECORD_HEADER_LEN + bytes.len()) as u64;
         self.count = count;
         Ok(r)
@@ -88,10 +71,7 @@ impl BlobWriter {
     /// Writes the header and fsyncs. Returns the file's length in bytes.
     pub fn finish(self) -> Result<u64> {
         let path = self.path;
-        let mut file = self
-            .file
-            .into_inner()
-            .map_err(|e| Error::io(&path, e.into_error()))?;
+        let mut file = self.file.into_inner().map_err(|e| Error::io(&path, e.into_error()))?;
         file.sync_all().map_err(|e| Error::io(&path, e))?;
         let mut h = [0u8; BLOB_HEADER_LEN];
         h[0..8].copy_from_slice(&BLOB_MAGIC);
@@ -133,37 +113,22 @@ impl BlobFile {
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         let mut h = [0u8; BLOB_HEADER_LEN];
         let got = usize::try_from(len).map_or(BLOB_HEADER_LEN, |l| l.min(BLOB_HEADER_LEN));
-        file.read_exact_at(&mut h[..got], 0)
-            .map_err(|e| Error::io(path, e))?;
+        file.read_exact_at(&mut h[..got], 0).map_err(|e| Error::io(path, e))?;
         if h[..got.min(8)] != BLOB_MAGIC[..got.min(8)] {
-            return Err(Error::WrongMagic {
-                path: path_str(path),
-                expected: "blob",
-            });
+            return Err(Error::WrongMagic { path: path_str(path), expected: "blob" });
         }
         if got < BLOB_HEADER_LEN {
-            return Err(Error::truncated(
-                path,
-                format!("{len} bytes, shorter than the {BLOB_HEADER_LEN}-byte header"),
-            ));
+            return Err(Error::truncated(path, format!("{len} bytes, shorter than the {BLOB_HEADER_LEN}-byte header")));
         }
         if crc32fast::hash(&h[0..28]) != u32_at(&h, 28).unwrap_or(0) {
             return Err(Error::corrupt(path, "header checksum mismatch"));
         }
         if h[8..12] != kind {
-            return Err(Error::WrongKind {
-                path: path_str(path),
-                found: tag_str(&h[8..12]),
-                expected: tag_str(&kind),
-            });
+            return Err(Error::WrongKind { path: path_str(path), found: tag_str(&h[8..12]), expected: tag_str(&kind) });
         }
         let version = u32_at(&h, 12).unwrap_or(0);
         if version != FORMAT_VERSION {
-            return Err(Error::WrongVersion {
-                path: path_str(path),
-                found: version,
-                expected: FORMAT_VERSION,
-            });
+            return Err(Error::WrongVersion { path: path_str(path), found: version, expected: FORMAT_VERSION });
         }
         let data_len = u64_at(&h, 16).unwrap_or(0);
         let count = u32_at(&h, 24).unwrap_or(0);
@@ -171,33 +136,20 @@ impl BlobFile {
             .checked_add(BLOB_HEADER_LEN as u64)
             .ok_or_else(|| Error::corrupt(path, "data length overflows"))?;
         if len < expected {
-            return Err(Error::truncated(
-                path,
-                format!("{len} bytes, header says {expected}"),
-            ));
+            return Err(Error::truncated(path, format!("{len} bytes, header says {expected}")));
         }
         if len > expected {
-            return Err(Error::corrupt(
-                path,
-                format!("{len} bytes, header says {expected}: trailing bytes"),
-            ));
+            return Err(Error::corrupt(path, format!("{len} bytes, header says {expected}: trailing bytes")));
         }
         if data_len / (RECORD_HEADER_LEN as u64) < u64::from(count) {
-            return Err(Error::corrupt(
-                path,
-                format!("{count} records cannot fit in {data_len} bytes"),
-            ));
+            return Err(Error::corrupt(path, format!("{count} records cannot fit in {data_len} bytes")));
         }
         // SAFETY: database files are immutable once renamed into place; the length is checked.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
         if map.len() as u64 != expected {
             return Err(Error::corrupt(path, "file changed while opening"));
         }
-        Ok(Self {
-            path: path.to_path_buf(),
-            map,
-            count,
-        })
+        Ok(Self { path: path.to_path_buf(), map, count })
     }
 
     pub fn path(&self) -> &Path {
@@ -219,13 +171,10 @@ impl BlobFile {
             .ok()
             .filter(|&s| s >= BLOB_HEADER_LEN)
             .ok_or_else(|| bad(format!("record offset {} outside the data", r.offset)))?;
-        let stored_len = u32_at(&self.map, start)
-            .ok_or_else(|| bad(format!("record offset {} beyond the end", r.offset)))?;
+        let stored_len =
+            u32_at(&self.map, start).ok_or_else(|| bad(format!("record offset {} beyond the end", r.offset)))?;
         if stored_len != r.len {
-            return Err(bad(format!(
-                "record at byte {} has {stored_len} bytes, reference says {}",
-                r.offset, r.len
-            )));
+            return Err(bad(format!("record at byte {} has {stored_len} bytes, reference says {}", r.offset, r.len)));
         }
         let data_start = start + RECORD_HEADER_LEN;
         let data = data_start
@@ -233,10 +182,7 @@ impl BlobFile {
             .and_then(|end| self.map.get(data_start..end))
             .ok_or_else(|| bad(format!("record at byte {} runs past the end", r.offset)))?;
         if crc32fast::hash(data) != u32_at(&self.map, start + 4).unwrap_or(0) {
-            return Err(Error::RecordChecksum {
-                path: path_str(&self.path),
-                offset: r.offset,
-            });
+            return Err(Error::RecordChecksum { path: path_str(&self.path), offset: r.offset });
         }
         Ok(data)
     }
@@ -253,10 +199,7 @@ impl BlobFile {
             left -= 1;
             let Some(len) = u32_at(&self.map, offset as usize) else {
                 left = 0;
-                return Some(Err(Error::truncated(
-                    &self.path,
-                    format!("record {index} of {} missing", self.count),
-                )));
+                return Some(Err(Error::truncated(&self.path, format!("record {index} of {} missing", self.count))));
             };
             let r = BlobRef { offset, len };
             let item = self.get(r).map(|b| (r, b));

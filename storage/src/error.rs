@@ -15,24 +15,13 @@ pub enum Error {
     },
     /// The file does not start with the expected magic number: it is not an hdov file of this type.
     #[error("{path}: wrong magic number: not an hdov {expected} file")]
-    WrongMagic {
-        path: String,
-        expected: &'static str,
-    },
+    WrongMagic { path: String, expected: &'static str },
     /// An hdov file, but of another kind (e.g. a tree file opened as a V-page file).
     #[error("{path}: file kind {found:?}, expected {expected:?}")]
-    WrongKind {
-        path: String,
-        found: String,
-        expected: String,
-    },
+    WrongKind { path: String, found: String, expected: String },
     /// Written by another format version.
     #[error("{path}: format version {found}, this build reads version {expected}")]
-    WrongVersion {
-        path: String,
-        found: u32,
-        expected: u32,
-    },
+    WrongVersion { path: String, found: u32, expected: u32 },
     /// The file is shorter than its header says.
     #[error("{path}: truncated: {reason}")]
     Truncated { path: String, reason: String },
@@ -61,27 +50,15 @@ pub(crate) fn path_str(path: &Path) -> String {
 
 impl Error {
     pub(crate) fn io(path: &Path, source: io::Error) -> Self {
-        Error::Io {
-            path: path_str(path),
-            source,
-        }
+        Error::Io { path: path_str(path), source }
     }
     pub(crate) fn corrupt(path: &Path, reason: impl Into<String>) -> Self {
-        Error::Corrupt {
-            path: path_str(path),
-            reason: reason.into(),
-        }
+        Error::Corrupt { path: path_str(path), reason: reason.into() }
     }
     pub(crate) fn truncated(path: &Path, reason: impl Into<String>) -> Self {
-        Error::Truncated {
-            path: path_str(path),
-            reason: reason.into(),
-        }
+        Error::Truncated { path: path_str(path), reason: reason.into() }
     }
     pub(crate) fn invalid(path: &Path, reason: impl Into<String>) -> Self {
-        Error::Invalid {
-            path: path_str(path),
-            reason: reason.into(),
-        }
+        Error::Invalid { path: path_str(path), reason: reason.into() }
     }
 }

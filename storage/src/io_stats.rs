@@ -40,9 +40,6 @@ impl IoStats {
     }
     /// Pages read from the named file (0 if this reader has no such file).
     pub fn file(&self, name: &str) -> u64 {
-        self.files
-            .iter()
-            .find(|f| f.file == name)
-            .map_or(0, |f| f.pages_read)
+        self.files.iter().find(|f| f.file == name).map_or(0, |f| f.pages_read)
     }
 }

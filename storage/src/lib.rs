@@ -25,8 +25,6 @@ pub use atomic::{DirTxn, write_file_synced};
 pub use blob::{BlobFile, BlobRef, BlobWriter};
 pub use error::{Error, Result};
 pub use io_stats::{FileIo, IoStats, PageCounter};
-pub use layout::{
-    FlipCost, LayoutKind, LayoutOptions, LayoutReader, LayoutSize, LayoutSummary, write_layout,
-};
+pub use layout::{FlipCost, LayoutKind, LayoutOptions, LayoutReader, LayoutSize, LayoutSummary, write_layout};
 pub use pagefile::{FORMAT_VERSION, PageFile, PageFileWriter, ReadMode};
 pub use vpage::{DovCodec, VData, VDataStats, VEntry, VPageCodec};

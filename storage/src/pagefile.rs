@@ -52,10 +52,7 @@ pub enum ReadMode {
 
 fn check_page_size(path: &Path, page_size: u32) -> Result<()> {
     if !(MIN_PAGE_SIZE..=MAX_PAGE_SIZE).contains(&page_size) {
-        return Err(Error::invalid(
-            path,
-            format!("page size {page_size} outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}"),
-        ));
+        return Err(Error::invalid(path, format!("page size {page_size} outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}")));
     }
     Ok(())
 }
@@ -88,16 +85,8 @@ impl PageFileWriter {
         check_page_size(path, page_size)?;
         let file = File::create(path).map_err(|e| Error::io(path, e))?;
         let mut file = std::io::BufWriter::with_capacity(1 << 16, file);
-        file.write_all(&vec![0u8; page_size as usize])
-            .map_err(|e| Error::io(path, e))?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            file,
-            kind,
-            page_size,
-            page_count: 0,
-            buf: vec![0u8; page_size as usize],
-        })
+        file.write_all(&vec![0u8; page_size as usize]).map_err(|e| Error::io(path, e))?;
+        Ok(Self { path: path.to_path_buf(), file, kind, page_size, page_count: 0, buf: vec![0u8; page_size as usize] })
     }
 
     /// Bytes of payload a page holds: page size − 4.
@@ -120,21 +109,15 @@ impl PageFileWriter {
         if payload.len() > cap {
             return Err(Error::invalid(
                 &self.path,
-                format!(
-                    "payload of {} bytes exceeds page capacity {cap}",
-                    payload.len()
-                ),
+                format!("payload of {} bytes exceeds page capacity {cap}", payload.len()),
             ));
         }
-        let page_no = u32::try_from(self.page_count)
-            .map_err(|_| Error::invalid(&self.path, "more than 2^32 pages"))?;
+        let page_no = u32::try_from(self.page_count).map_err(|_| Error::invalid(&self.path, "more than 2^32 pages"))?;
         self.buf[..payload.len()].copy_from_slice(payload);
         self.buf[payload.len()..cap].fill(0);
         let crc = crc32fast::hash(&self.buf[..cap]);
         self.buf[cap..].copy_from_slice(&crc.to_le_bytes());
-        self.file
-            .write_all(&self.buf)
-            .map_err(|e| Error::io(&self.path, e))?;
+        self.file.write_all(&self.buf).map_err(|e| Error::io(&self.path, e))?;
         self.page_count += 1;
         Ok(page_no)
     }
@@ -142,16 +125,11 @@ impl PageFileWriter {
     /// Writes the header and fsyncs the file. Returns the file's length in bytes.
     pub fn finish(self) -> Result<u64> {
         let path = self.path;
-        let mut file = self
-            .file
-            .into_inner()
-            .map_err(|e| Error::io(&path, e.into_error()))?;
+        let mut file = self.file.into_inner().map_err(|e| Error::io(&path, e.into_error()))?;
         file.sync_all().map_err(|e| Error::io(&path, e))?;
         // The header goes in only after the pages are durable: a torn write never opens.
-        file.seek(SeekFrom::Start(0))
-            .map_err(|e| Error::io(&path, e))?;
-        file.write_all(&encode_header(self.kind, self.page_size, self.page_count))
-            .map_err(|e| Error::io(&path, e))?;
+        file.seek(SeekFrom::Start(0)).map_err(|e| Error::io(&path, e))?;
+        file.write_all(&encode_header(self.kind, self.page_size, self.page_count)).map_err(|e| Error::io(&path, e))?;
         file.sync_all().map_err(|e| Error::io(&path, e))?;
         Ok((self.page_count + 1) * u64::from(self.page_size))
     }
@@ -189,19 +167,12 @@ impl PageFile {
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         let mut header = [0u8; HEADER_LEN];
         let got = usize::try_from(len).map_or(HEADER_LEN, |l| l.min(HEADER_LEN));
-        file.read_exact_at(&mut header[..got], 0)
-            .map_err(|e| Error::io(path, e))?;
+        file.read_exact_at(&mut header[..got], 0).map_err(|e| Error::io(path, e))?;
         if header[..got.min(8)] != PAGE_MAGIC[..got.min(8)] {
-            return Err(Error::WrongMagic {
-                path: path_str(path),
-                expected: "page",
-            });
+            return Err(Error::WrongMagic { path: path_str(path), expected: "page" });
         }
         if got < HEADER_LEN {
-            return Err(Error::truncated(
-                path,
-                format!("{len} bytes, shorter than the {HEADER_LEN}-byte header"),
-            ));
+            return Err(Error::truncated(path, format!("{len} bytes, shorter than the {HEADER_LEN}-byte header")));
         }
         let (page_size, page_count) = decode_header(path, &header, kind)?;
         let expected = page_count
@@ -211,16 +182,11 @@ impl PageFile {
         if len < expected {
             return Err(Error::truncated(
                 path,
-                format!(
-                    "{len} bytes, header says {page_count} pages of {page_size} bytes ({expected} bytes)"
-                ),
+                format!("{len} bytes, header says {page_count} pages of {page_size} bytes ({expected} bytes)"),
             ));
         }
         if len > expected {
-            return Err(Error::corrupt(
-                path,
-                format!("{len} bytes, header says {expected}: trailing bytes"),
-            ));
+            return Err(Error::corrupt(path, format!("{len} bytes, header says {expected}: trailing bytes")));
         }
         let backing = match mode {
             ReadMode::Mmap => {
@@ -234,13 +200,7 @@ impl PageFile {
             }
             ReadMode::Pread => Backing::Pread(file),
         };
-        Ok(Self {
-            path: path.to_path_buf(),
-            backing,
-            page_size,
-            page_count,
-            reads: PageCounter::default(),
-        })
+        Ok(Self { path: path.to_path_buf(), backing, page_size, page_count, reads: PageCounter::default() })
     }
 
     pub fn path(&self) -> &Path {
@@ -277,24 +237,21 @@ impl PageFile {
         let page: Cow<'_, [u8]> = match &self.backing {
             Backing::Mmap(map) => {
                 let start = start as usize;
-                Cow::Borrowed(map.get(start..start + ps).ok_or_else(|| {
-                    Error::truncated(&self.path, format!("page {n} beyond the mapping"))
-                })?)
+                Cow::Borrowed(
+                    map.get(start..start + ps)
+                        .ok_or_else(|| Error::truncated(&self.path, format!("page {n} beyond the mapping")))?,
+                )
             }
             Backing::Pread(file) => {
                 let mut buf = vec![0u8; ps];
-                file.read_exact_at(&mut buf, start)
-                    .map_err(|e| Error::io(&self.path, e))?;
+                file.read_exact_at(&mut buf, start).map_err(|e| Error::io(&self.path, e))?;
                 Cow::Owned(buf)
             }
         };
         let cap = ps - PAGE_CRC_LEN;
         let stored = u32_at(&page, cap).unwrap_or(0);
         if crc32fast::hash(&page[..cap]) != stored {
-            return Err(Error::Checksum {
-                path: path_str(&self.path),
-                page: n,
-            });
+            return Err(Error::Checksum { path: path_str(&self.path), page: n });
         }
         Ok(match page {
             Cow::Borrowed(b) => Cow::Borrowed(&b[..cap]),
@@ -317,36 +274,22 @@ impl PageFile {
 /// Checks magic, header crc, kind, version and page size; returns (page size, page count).
 fn decode_header(path: &Path, h: &[u8; HEADER_LEN], kind: [u8; 4]) -> Result<(u32, u64)> {
     if h[0..8] != PAGE_MAGIC {
-        return Err(Error::WrongMagic {
-            path: path_str(path),
-            expected: "page",
-        });
+        return Err(Error::WrongMagic { path: path_str(path), expected: "page" });
     }
     let crc = u32_at(h, 28).unwrap_or(0);
     if crc32fast::hash(&h[0..28]) != crc {
         return Err(Error::corrupt(path, "header checksum mismatch"));
     }
     if h[8..12] != kind {
-        return Err(Error::WrongKind {
-            path: path_str(path),
-            found: tag_str(&h[8..12]),
-            expected: tag_str(&kind),
-        });
+        return Err(Error::WrongKind { path: path_str(path), found: tag_str(&h[8..12]), expected: tag_str(&kind) });
     }
     let version = u32_at(h, 12).unwrap_or(0);
     if version != FORMAT_VERSION {
-        return Err(Error::WrongVersion {
-            path: path_str(path),
-            found: version,
-            expected: FORMAT_VERSION,
-        });
+        return Err(Error::WrongVersion { path: path_str(path), found: version, expected: FORMAT_VERSION });
     }
     let page_size = u32_at(h, 16).unwrap_or(0);
     if !(MIN_PAGE_SIZE..=MAX_PAGE_SIZE).contains(&page_size) {
-        return Err(Error::corrupt(
-            path,
-            format!("page size {page_size} outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}"),
-        ));
+        return Err(Error::corrupt(path, format!("page size {page_size} outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}")));
     }
     let page_count = u64_at(h, 20).unwrap_or(0);
     Ok((page_size, page_count))

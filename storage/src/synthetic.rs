@@ -21,14 +21,7 @@ pub struct SyntheticSpec {
 
 impl Default for SyntheticSpec {
     fn default() -> Self {
-        Self {
-            cells: 64,
-            fanout: 16,
-            levels: 3,
-            reach: 0.1,
-            visible_share: 0.3,
-            seed: 1,
-        }
+        Self { cells: 64, fanout: 16, levels: 3, reach: 0.1, visible_share: 0.3, seed: 1 }
     }
 }
 
@@ -89,10 +82,7 @@ pub fn synthetic_vdata(spec: &SyntheticSpec) -> VData {
                 let seen = &object_dov[lo..lo + span as usize];
                 let sum: f32 = seen.iter().sum();
                 let nvo = seen.iter().filter(|&&d| d > 0.0).count() as u32;
-                entries.push(VEntry {
-                    dov: sum.min(1.0),
-                    nvo,
-                });
+                entries.push(VEntry { dov: sum.min(1.0), nvo });
             }
             if entries.iter().any(|e| e.dov > 0.0) {
                 cell.push((dfs_no as u32, entries));
@@ -100,9 +90,5 @@ pub fn synthetic_vdata(spec: &SyntheticSpec) -> VData {
         }
         cells.push(cell);
     }
-    VData {
-        cell_count: spec.cells,
-        node_fanout,
-        cells,
-    }
+    VData { cell_count: spec.cells, node_fanout, cells }
 }

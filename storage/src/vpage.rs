@@ -52,11 +52,7 @@ impl VData {
     /// and ≥ 0. Returns the reason for the first violation.
     pub fn validate(&self) -> Result<(), String> {
         if self.cells.len() as u64 != u64::from(self.cell_count) {
-            return Err(format!(
-                "cell_count {} but {} cells given",
-                self.cell_count,
-                self.cells.len()
-            ));
+            return Err(format!("cell_count {} but {} cells given", self.cell_count, self.cells.len()));
         }
         let n = self.node_fanout.len();
         if u32::try_from(n).is_err() {
@@ -66,28 +62,17 @@ impl VData {
             let mut prev: Option<u32> = None;
             for (node, entries) in cell {
                 if prev.is_some_and(|p| p >= *node) {
-                    return Err(format!(
-                        "cell {c}: nodes not strictly increasing at node {node}"
-                    ));
+                    return Err(format!("cell {c}: nodes not strictly increasing at node {node}"));
                 }
                 prev = Some(*node);
                 let Some(&fanout) = self.node_fanout.get(*node as usize) else {
                     return Err(format!("cell {c}: node {node} out of range ({n} nodes)"));
                 };
                 if entries.len() != usize::from(fanout) {
-                    return Err(format!(
-                        "cell {c}, node {node}: {} V-entries for {fanout} entries",
-                        entries.len()
-                    ));
+                    return Err(format!("cell {c}, node {node}: {} V-entries for {fanout} entries", entries.len()));
                 }
-                if let Some(e) = entries
-                    .iter()
-                    .find(|e| !(e.dov >= 0.0 && e.dov.is_finite()))
-                {
-                    return Err(format!(
-                        "cell {c}, node {node}: DoV {} not finite and ≥ 0",
-                        e.dov
-                    ));
+                if let Some(e) = entries.iter().find(|e| !(e.dov >= 0.0 && e.dov.is_finite())) {
+                    return Err(format!("cell {c}, node {node}: DoV {} not finite and ≥ 0", e.dov));
                 }
             }
         }
@@ -96,11 +81,8 @@ impl VData {
 
     /// Visible-node counts and the largest NVO. All-zero V-pages do not count as visible.
     pub fn stats(&self) -> VDataStats {
-        let mut s = VDataStats {
-            cell_count: self.cell_count,
-            node_count: self.node_fanout.len() as u32,
-            ..Default::default()
-        };
+        let mut s =
+            VDataStats { cell_count: self.cell_count, node_count: self.node_fanout.len() as u32, ..Default::default() };
         for cell in &self.cells {
             let visible = cell.iter().filter(|(_, e)| !is_zero_page(e)).count() as u32;
             s.visible_total += u64::from(visible);
@@ -111,11 +93,7 @@ impl VData {
                 }
             }
         }
-        s.visible_mean = if self.cell_count == 0 {
-            0.0
-        } else {
-            s.visible_total as f64 / f64::from(self.cell_count)
-        };
+        s.visible_mean = if self.cell_count == 0 { 0.0 } else { s.visible_total as f64 / f64::from(self.cell_count) };
         s
     }
 }
@@ -284,10 +262,7 @@ mod tests {
             assert!(rel <= f64::from(LOG_DOV_REL_ERROR), "{d} -> {r}: {rel}");
             d *= 1.000_37;
         }
-        assert!(
-            worst > 1.0e-4,
-            "sweep too coarse to probe the bound: {worst}"
-        );
+        assert!(worst > 1.0e-4, "sweep too coarse to probe the bound: {worst}");
         assert_eq!(dequantize_dov(quantize_dov(1.0)), 1.0);
         assert_eq!(quantize_dov(0.0), 0);
         assert_eq!(dequantize_dov(0), 0.0);
@@ -305,18 +280,8 @@ mod tests {
 
     #[test]
     fn codec_round_trip() {
-        let entries = [
-            VEntry { dov: 0.25, nvo: 3 },
-            VEntry { dov: 0.0, nvo: 0 },
-            VEntry {
-                dov: 1.0,
-                nvo: 65535,
-            },
-        ];
-        for codec in [
-            VPageCodec::new(DovCodec::F32, 65535),
-            VPageCodec::new(DovCodec::F32, 70000),
-        ] {
+        let entries = [VEntry { dov: 0.25, nvo: 3 }, VEntry { dov: 0.0, nvo: 0 }, VEntry { dov: 1.0, nvo: 65535 }];
+        for codec in [VPageCodec::new(DovCodec::F32, 65535), VPageCodec::new(DovCodec::F32, 70000)] {
             let mut bytes = Vec::new();
             codec.encode(&entries, &mut bytes);
             assert_eq!(bytes.len(), codec.vpage_bytes(3));
@@ -324,10 +289,7 @@ mod tests {
             codec.decode(&bytes, &mut out);
             assert_eq!(out, entries);
         }
-        let big = [VEntry {
-            dov: 0.5,
-            nvo: 70000,
-        }];
+        let big = [VEntry { dov: 0.5, nvo: 70000 }];
         let codec = VPageCodec::new(DovCodec::LogU16, 70000);
         assert_eq!(codec.entry_bytes(), 6);
         let mut bytes = Vec::new();
@@ -343,10 +305,7 @@ mod tests {
         let ok = VData {
             cell_count: 1,
             node_fanout: vec![2, 1],
-            cells: vec![vec![
-                (0, vec![VEntry::default(); 2]),
-                (1, vec![VEntry::default()]),
-            ]],
+            cells: vec![vec![(0, vec![VEntry::default(); 2]), (1, vec![VEntry::default()])]],
         };
         assert!(ok.validate().is_ok());
         let mut bad = ok.clone();

@@ -5,10 +5,8 @@ use std::fs;
 use hdov_storage::{DirTxn, Error, write_file_synced};
 
 fn entries(dir: &std::path::Path) -> Vec<String> {
-    let mut v: Vec<_> = fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let mut v: Vec<_> =
+        fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     v.sort();
     v
 }
@@ -36,10 +34,7 @@ fn existing_target_needs_force() {
     write_file_synced(&target.join("old"), b"old").unwrap();
     let e = DirTxn::begin(&target, false).unwrap_err();
     assert!(matches!(e, Error::Exists { .. }));
-    assert!(
-        e.to_string().ends_with("exists; pass --force to overwrite"),
-        "{e}"
-    );
+    assert!(e.to_string().ends_with("exists; pass --force to overwrite"), "{e}");
 
     let txn = DirTxn::begin(&target, true).unwrap();
     write_file_synced(&txn.path().join("new"), b"new").unwrap();
@@ -68,13 +63,7 @@ fn drop_without_commit_removes_temp() {
         let txn = DirTxn::begin(&target, false).unwrap();
         write_file_synced(&txn.path().join("a"), b"x").unwrap();
         assert!(txn.path().exists());
-        assert!(
-            txn.path()
-                .file_name()
-                .unwrap()
-                .to_string_lossy()
-                .starts_with(".db.tmp-")
-        );
+        assert!(txn.path().file_name().unwrap().to_string_lossy().starts_with(".db.tmp-"));
     }
     assert!(entries(root.path()).is_empty());
 }

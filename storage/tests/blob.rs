@@ -7,11 +7,7 @@ use hdov_storage::{BlobFile, BlobRef, BlobWriter, Error, FORMAT_VERSION};
 const KIND: [u8; 4] = *b"MESH";
 
 fn sample() -> Vec<Vec<u8>> {
-    vec![
-        b"first".to_vec(),
-        vec![],
-        (0..1000u32).map(|i| i as u8).collect(),
-    ]
+    vec![b"first".to_vec(), vec![], (0..1000u32).map(|i| i as u8).collect()]
 }
 
 fn write(path: &std::path::Path) -> Vec<BlobRef> {
@@ -47,22 +43,10 @@ fn bad_references_are_errors() {
     let f = BlobFile::open(&path, KIND).unwrap();
     for r in [
         BlobRef { offset: 0, len: 5 },
-        BlobRef {
-            offset: u64::MAX,
-            len: 5,
-        },
-        BlobRef {
-            offset: refs[0].offset,
-            len: 4,
-        },
-        BlobRef {
-            offset: refs[0].offset + 1,
-            len: 5,
-        },
-        BlobRef {
-            offset: f.file_len() - 2,
-            len: 0,
-        },
+        BlobRef { offset: u64::MAX, len: 5 },
+        BlobRef { offset: refs[0].offset, len: 4 },
+        BlobRef { offset: refs[0].offset + 1, len: 5 },
+        BlobRef { offset: f.file_len() - 2, len: 0 },
     ] {
         assert!(f.get(r).is_err(), "{r:?}");
     }
@@ -96,50 +80,32 @@ fn header_damage() {
     let mut b = good.clone();
     b[3] = 0;
     fs::write(&path, &b).unwrap();
-    assert!(matches!(
-        BlobFile::open(&path, KIND),
-        Err(Error::WrongMagic { .. })
-    ));
+    assert!(matches!(BlobFile::open(&path, KIND), Err(Error::WrongMagic { .. })));
 
     let mut b = good.clone();
     b.truncate(good.len() - 1);
     fs::write(&path, &b).unwrap();
-    assert!(matches!(
-        BlobFile::open(&path, KIND),
-        Err(Error::Truncated { .. })
-    ));
+    assert!(matches!(BlobFile::open(&path, KIND), Err(Error::Truncated { .. })));
 
     for cut in [0, 4, 31] {
         fs::write(&path, &good[..cut]).unwrap();
-        assert!(matches!(
-            BlobFile::open(&path, KIND),
-            Err(Error::Truncated { .. })
-        ));
+        assert!(matches!(BlobFile::open(&path, KIND), Err(Error::Truncated { .. })));
     }
 
     fs::write(&path, &good).unwrap();
-    assert!(matches!(
-        BlobFile::open(&path, *b"TREE"),
-        Err(Error::WrongKind { .. })
-    ));
+    assert!(matches!(BlobFile::open(&path, *b"TREE"), Err(Error::WrongKind { .. })));
 
     let mut b = good.clone();
     b[12..16].copy_from_slice(&(FORMAT_VERSION + 7).to_le_bytes());
     rehash(&mut b);
     fs::write(&path, &b).unwrap();
-    assert!(matches!(
-        BlobFile::open(&path, KIND),
-        Err(Error::WrongVersion { .. })
-    ));
+    assert!(matches!(BlobFile::open(&path, KIND), Err(Error::WrongVersion { .. })));
 
     let mut b = good.clone();
     b[24..28].copy_from_slice(&u32::MAX.to_le_bytes());
     rehash(&mut b);
     fs::write(&path, &b).unwrap();
-    assert!(matches!(
-        BlobFile::open(&path, KIND),
-        Err(Error::Corrupt { .. })
-    ));
+    assert!(matches!(BlobFile::open(&path, KIND), Err(Error::Corrupt { .. })));
 
     let mut b = good.clone();
     b[24] ^= 1;

@@ -6,9 +6,7 @@ use std::path::Path;
 use hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE;
 use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
 use hdov_storage::vpage::LOG_DOV_REL_ERROR;
-use hdov_storage::{
-    DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, VEntry, write_layout,
-};
+use hdov_storage::{DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, VEntry, write_layout};
 use proptest::prelude::*;
 
 fn write_all(dir: &Path, data: &VData, opts: &LayoutOptions) {
@@ -38,12 +36,7 @@ fn check_equal(got: &[VEntry], want: &[VEntry], codec: DovCodec) {
                     assert!(g.dov > 0.0, "visible entry became hidden");
                     let min = hdov_storage::vpage::LOG_DOV_MIN as f32;
                     let w_dov = w.dov.clamp(min, 1.0);
-                    assert!(
-                        (g.dov - w_dov).abs() <= w_dov * LOG_DOV_REL_ERROR,
-                        "{} stored as {}",
-                        w.dov,
-                        g.dov
-                    );
+                    assert!((g.dov - w_dov).abs() <= w_dov * LOG_DOV_REL_ERROR, "{} stored as {}", w.dov, g.dov);
                 }
             }
         }
@@ -79,23 +72,12 @@ fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
 fn arb_vdata() -> impl Strategy<Value = VData> {
     (1u32..6, prop::collection::vec(0u16..40, 1..12)).prop_flat_map(|(cells, fanout)| {
         let nodes = fanout.len();
-        let entry = (
-            prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6],
-            prop_oneof![0u32..10, Just(70_000u32)],
-        );
+        let entry = (prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6], prop_oneof![0u32..10, Just(70_000u32)]);
         let page = |f: u16| prop::collection::vec(entry.clone(), f as usize);
-        let per_node: Vec<_> = fanout
-            .iter()
-            .map(|&f| prop::option::weighted(0.5, page(f)))
-            .collect();
+        let per_node: Vec<_> = fanout.iter().map(|&f| prop::option::weighted(0.5, page(f))).collect();
         let cell = per_node;
-        (
-            Just(cells),
-            Just(fanout.clone()),
-            prop::collection::vec(cell, cells as usize),
-            Just(nodes),
-        )
-            .prop_map(|(cells, fanout, raw, _)| VData {
+        (Just(cells), Just(fanout.clone()), prop::collection::vec(cell, cells as usize), Just(nodes)).prop_map(
+            |(cells, fanout, raw, _)| VData {
                 cell_count: cells,
                 node_fanout: fanout,
                 cells: raw
@@ -112,7 +94,8 @@ fn arb_vdata() -> impl Strategy<Value = VData> {
                             .collect()
                     })
                     .collect(),
-            })
+            },
+        )
     })
 }
 
@@ -135,12 +118,7 @@ proptest! {
 #[test]
 fn synthetic_round_trip_small_pages() {
     // Page size 64: many V-pages span pages, many segments too.
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 7,
-        fanout: 9,
-        levels: 3,
-        ..Default::default()
-    });
+    let data = synthetic_vdata(&SyntheticSpec { cells: 7, fanout: 9, levels: 3, ..Default::default() });
     assert!(data.stats().visible_total > 0);
     for dov in [DovCodec::F32, DovCodec::LogU16] {
         for page_size in [64, 4096] {
@@ -154,14 +132,8 @@ fn synthetic_round_trip_small_pages() {
 #[test]
 fn flip_costs_follow_the_design() {
     // 1 + 32 + 32^2 = 1057 nodes; a vertical segment is 6342 bytes = 2 pages of 4 KiB.
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 20,
-        fanout: 32,
-        levels: 3,
-        reach: 0.05,
-        visible_share: 0.2,
-        seed: 7,
-    });
+    let data =
+        synthetic_vdata(&SyntheticSpec { cells: 20, fanout: 32, levels: 3, reach: 0.05, visible_share: 0.2, seed: 7 });
     let dir = tempfile::tempdir().unwrap();
     write_all(dir.path(), &data, &LayoutOptions::default());
     let stats = data.stats();
@@ -177,18 +149,11 @@ fn flip_costs_follow_the_design() {
                 LayoutKind::Vertical => assert_eq!(cost.pages_read, 2),
                 // 10 bytes per visible node, at most one page here.
                 LayoutKind::IndexedVertical => {
-                    assert_eq!(
-                        cost.pages_read,
-                        u64::from(visible > 0) * (visible * 10).div_ceil(4092)
-                    )
+                    assert_eq!(cost.pages_read, u64::from(visible > 0) * (visible * 10).div_ceil(4092))
                 }
             }
             assert!(cost.pages_read <= u64::from(s.flip_pages_max));
-            assert_eq!(
-                r.flip_to_cell(cell).unwrap().pages_read,
-                0,
-                "same cell is free"
-            );
+            assert_eq!(r.flip_to_cell(cell).unwrap().pages_read, 0, "same cell is free");
         }
         // Reading every visible V-page of a cell in dfs order: vertical layouts read each page
         // of the cell's run once; horizontal reads one page per visible node.
@@ -212,26 +177,12 @@ fn flip_costs_follow_the_design() {
 
 #[test]
 fn sizes_rank_as_in_the_thesis() {
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 30,
-        fanout: 16,
-        levels: 3,
-        ..Default::default()
-    });
+    let data = synthetic_vdata(&SyntheticSpec { cells: 30, fanout: 16, levels: 3, ..Default::default() });
     let dir = tempfile::tempdir().unwrap();
     let size = |kind, dov| {
         let d = dir.path().join(format!("{kind}-{dov}"));
         std::fs::create_dir(&d).unwrap();
-        let s = write_layout(
-            &d,
-            kind,
-            &data,
-            &LayoutOptions {
-                dov,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let s = write_layout(&d, kind, &data, &LayoutOptions { dov, ..Default::default() }).unwrap();
         let on_disk: u64 = s
             .files
             .iter()
@@ -246,60 +197,35 @@ fn sizes_rank_as_in_the_thesis() {
     let h = size(LayoutKind::Horizontal, DovCodec::F32);
     let v = size(LayoutKind::Vertical, DovCodec::F32);
     let iv = size(LayoutKind::IndexedVertical, DovCodec::F32);
-    assert!(
-        h > v && v > iv,
-        "horizontal {h}, vertical {v}, indexed {iv}"
-    );
+    assert!(h > v && v > iv, "horizontal {h}, vertical {v}, indexed {iv}");
     let iv_q = size(LayoutKind::IndexedVertical, DovCodec::LogU16);
     assert!(iv_q < iv);
 }
 
 #[test]
 fn misuse_is_an_error() {
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 3,
-        fanout: 4,
-        levels: 2,
-        ..Default::default()
-    });
+    let data = synthetic_vdata(&SyntheticSpec { cells: 3, fanout: 4, levels: 2, ..Default::default() });
     let dir = tempfile::tempdir().unwrap();
     write_all(dir.path(), &data, &LayoutOptions::default());
     for kind in LayoutKind::ALL {
         let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).unwrap();
-        assert!(
-            matches!(r.vpage(0), Err(Error::Invalid { .. })),
-            "before any flip"
-        );
+        assert!(matches!(r.vpage(0), Err(Error::Invalid { .. })), "before any flip");
         assert!(r.flip_to_cell(3).is_err());
         r.flip_to_cell(2).unwrap();
         assert!(r.vpage(5).is_err());
         // Another layout's directory is not this one.
         let other = tempfile::tempdir().unwrap();
-        assert!(matches!(
-            LayoutReader::open(other.path(), kind, ReadMode::Mmap),
-            Err(Error::Io { .. })
-        ));
+        assert!(matches!(LayoutReader::open(other.path(), kind, ReadMode::Mmap), Err(Error::Io { .. })));
     }
     let mut bad = data.clone();
     bad.cell_count = 4;
     assert!(matches!(
-        write_layout(
-            dir.path(),
-            LayoutKind::Vertical,
-            &bad,
-            &LayoutOptions::default()
-        ),
+        write_layout(dir.path(), LayoutKind::Vertical, &bad, &LayoutOptions::default()),
         Err(Error::Invalid { .. })
     ));
-    let opts = LayoutOptions {
-        page_size: MAX_LAYOUT_PAGE_SIZE * 2,
-        ..Default::default()
-    };
+    let opts = LayoutOptions { page_size: MAX_LAYOUT_PAGE_SIZE * 2, ..Default::default() };
     assert!(write_layout(dir.path(), LayoutKind::Vertical, &data, &opts).is_err());
-    assert_eq!(
-        "indexed-vertical".parse::<LayoutKind>(),
-        Ok(LayoutKind::IndexedVertical)
-    );
+    assert_eq!("indexed-vertical".parse::<LayoutKind>(), Ok(LayoutKind::IndexedVertical));
     assert_eq!(LayoutKind::Vertical.to_string(), "vertical");
     assert!("diagonal".parse::<LayoutKind>().is_err());
 }

@@ -17,11 +17,7 @@ fn write_sample(path: &Path, page_size: u32, pages: &[Vec<u8>]) {
 }
 
 fn sample_pages(cap: usize) -> Vec<Vec<u8>> {
-    vec![
-        vec![],
-        (0..cap).map(|i| (i * 7 + 1) as u8).collect(),
-        b"hello".to_vec(),
-    ]
+    vec![vec![], (0..cap).map(|i| (i * 7 + 1) as u8).collect(), b"hello".to_vec()]
 }
 
 #[test]
@@ -64,10 +60,7 @@ fn empty_file_opens_with_no_pages() {
 fn oversized_payload_and_bad_page_size_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("p");
-    assert!(matches!(
-        PageFileWriter::create(&path, KIND, 16),
-        Err(Error::Invalid { .. })
-    ));
+    assert!(matches!(PageFileWriter::create(&path, KIND, 16), Err(Error::Invalid { .. })));
     let mut w = PageFileWriter::create(&path, KIND, 64).unwrap();
     assert!(w.push(&[0u8; 60]).is_ok());
     assert!(matches!(w.push(&[0u8; 61]), Err(Error::Invalid { .. })));
@@ -80,10 +73,7 @@ fn unfinished_file_does_not_open() {
     let mut w = PageFileWriter::create(&path, KIND, 64).unwrap();
     w.push(b"x").unwrap();
     drop(w);
-    assert!(matches!(
-        PageFile::open(&path, KIND, ReadMode::Mmap),
-        Err(Error::WrongMagic { .. })
-    ));
+    assert!(matches!(PageFile::open(&path, KIND, ReadMode::Mmap), Err(Error::WrongMagic { .. })));
 }
 
 fn damaged(edit: impl FnOnce(&mut Vec<u8>)) -> (tempfile::TempDir, std::path::PathBuf) {
@@ -115,10 +105,7 @@ fn truncated_file() {
 #[test]
 fn trailing_bytes() {
     let (_d, path) = damaged(|b| b.extend_from_slice(&[0; 3]));
-    assert!(matches!(
-        PageFile::open(&path, KIND, ReadMode::Mmap),
-        Err(Error::Corrupt { .. })
-    ));
+    assert!(matches!(PageFile::open(&path, KIND, ReadMode::Mmap), Err(Error::Corrupt { .. })));
 }
 
 #[test]
@@ -145,10 +132,7 @@ fn flipped_header_byte_fails_header_checksum() {
 #[test]
 fn wrong_magic() {
     let (_d, path) = damaged(|b| b[0] = b'X');
-    assert!(matches!(
-        PageFile::open(&path, KIND, ReadMode::Mmap),
-        Err(Error::WrongMagic { .. })
-    ));
+    assert!(matches!(PageFile::open(&path, KIND, ReadMode::Mmap), Err(Error::WrongMagic { .. })));
 }
 
 #[test]
@@ -159,10 +143,7 @@ fn wrong_kind() {
     let e = PageFile::open(&path, *b"TREE", ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::WrongKind { .. }));
     let msg = e.to_string();
-    assert!(
-        msg.contains("TEST") && msg.contains("TREE") && !msg.contains('\n'),
-        "{msg}"
-    );
+    assert!(msg.contains("TEST") && msg.contains("TREE") && !msg.contains('\n'), "{msg}");
 }
 
 #[test]
@@ -172,9 +153,9 @@ fn wrong_version() {
         rehash_header(b);
     });
     match PageFile::open(&path, KIND, ReadMode::Mmap) {
-        Err(Error::WrongVersion {
-            found, expected, ..
-        }) => assert_eq!((found, expected), (FORMAT_VERSION + 1, FORMAT_VERSION)),
+        Err(Error::WrongVersion { found, expected, .. }) => {
+            assert_eq!((found, expected), (FORMAT_VERSION + 1, FORMAT_VERSION))
+        }
         other => panic!("{other:?}"),
     }
 }
@@ -190,10 +171,7 @@ fn huge_page_count_is_truncation_not_overflow() {
         b[20..28].copy_from_slice(&(1u64 << 40).to_le_bytes());
         rehash_header(b);
     });
-    assert!(matches!(
-        PageFile::open(&path, KIND, ReadMode::Mmap),
-        Err(Error::Truncated { .. })
-    ));
+    assert!(matches!(PageFile::open(&path, KIND, ReadMode::Mmap), Err(Error::Truncated { .. })));
 }
 
 #[test]

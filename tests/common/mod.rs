@@ -7,7 +7,11 @@ use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 /// An axis-aligned box mesh from `min` to `max` (12 triangles, outward facing).
 pub fn box_mesh(min: Vec3, max: Vec3) -> Mesh {
     let c = |i: usize| {
-        [if i & 1 == 0 { min.x } else { max.x }, if i & 2 == 0 { min.y } else { max.y }, if i & 4 == 0 { min.z } else { max.z }]
+        [
+            if i & 1 == 0 { min.x } else { max.x },
+            if i & 2 == 0 { min.y } else { max.y },
+            if i & 4 == 0 { min.z } else { max.z },
+        ]
     };
     let positions = (0..8).map(c).collect();
     #[rustfmt::skip]
@@ -50,8 +54,15 @@ pub fn town(n: usize) -> Scene {
         for j in 0..n {
             let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
             let h = 5.0 + ((i * 7 + j * 13) % 11) as f32 * 3.0;
-            scene.objects.push(Object { name: format!("house_{i}_{j}"), mesh: scene.meshes.len() as u32, transform: Mat4::IDENTITY });
-            scene.meshes.push(BaseMesh { name: format!("house_{i}_{j}"), mesh: box_mesh(Vec3::new(x, 0.0, z), Vec3::new(x + 12.0, h, z + 12.0)) });
+            scene.objects.push(Object {
+                name: format!("house_{i}_{j}"),
+                mesh: scene.meshes.len() as u32,
+                transform: Mat4::IDENTITY,
+            });
+            scene.meshes.push(BaseMesh {
+                name: format!("house_{i}_{j}"),
+                mesh: box_mesh(Vec3::new(x, 0.0, z), Vec3::new(x + 12.0, h, z + 12.0)),
+            });
             if (i + j) % 2 == 0 {
                 scene.objects.push(Object {
                     name: format!("ball_{i}_{j}"),

@@ -22,20 +22,12 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let cells = data.cell_count as usize;
     let cap = w.cap() as u64;
     let path = w.dir.join(VPAGES_FILE);
-    let meta_len = Meta::encoded_len(
-        LayoutKind::Horizontal,
-        u64::from(data.cell_count),
-        data.node_fanout.len() as u64,
-    );
+    let meta_len = Meta::encoded_len(LayoutKind::Horizontal, u64::from(data.cell_count), data.node_fanout.len() as u64);
     let data_start = super::record_pages(meta_len, cap);
     let node_pages: u64 = data
         .node_fanout
         .iter()
-        .map(|&f| {
-            slots(w.codec.vpage_bytes(f) as u64, cap)
-                .pages(cells as u64)
-                .unwrap_or(0)
-        })
+        .map(|&f| slots(w.codec.vpage_bytes(f) as u64, cap).pages(cells as u64).unwrap_or(0))
         .sum();
     let meta = Meta {
         kind: LayoutKind::Horizontal,
@@ -77,18 +69,11 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let (pages, bytes) = p.finish()?;
     debug_assert_eq!(pages, meta.vpages_pages);
     let vpage_bytes = (pages - data_start) * u64::from(w.page_size);
-    Ok(layout_size(
-        vec![(VPAGES_FILE.to_string(), bytes)],
-        vpage_bytes,
-    ))
+    Ok(layout_size(vec![(VPAGES_FILE.to_string(), bytes)], vpage_bytes))
 }
 
 fn slots(size: u64, cap: u64) -> SlotArray {
-    SlotArray {
-        first: 0,
-        size,
-        cap,
-    }
+    SlotArray { first: 0, size, cap }
 }
 
 pub(crate) struct Reader {
@@ -112,36 +97,22 @@ impl Reader {
             };
         }
         if page != file.file.page_count() {
-            return Err(file.corrupt(format!(
-                "V-page runs end at page {page}, file has {} pages",
-                file.file.page_count()
-            )));
+            return Err(
+                file.corrupt(format!("V-page runs end at page {page}, file has {} pages", file.file.page_count()))
+            );
         }
         Ok(Self { first })
     }
 
     /// The slot of `node` for `cell` (always present: hidden nodes have zero slots).
-    pub fn locate(
-        &self,
-        node: u32,
-        cell: u32,
-        len: usize,
-        file: &PagedFile,
-    ) -> Result<Option<Addr>> {
+    pub fn locate(&self, node: u32, cell: u32, len: usize, file: &PagedFile) -> Result<Option<Addr>> {
         if len == 0 {
             return Ok(None);
         }
         let cap = file.file.capacity() as u64;
-        let s = SlotArray {
-            first: self.first[node as usize],
-            size: len as u64,
-            cap,
-        };
+        let s = SlotArray { first: self.first[node as usize], size: len as u64, cap };
         let (page, offset) = s.addr(u64::from(cell));
         let page = u32::try_from(page).map_err(|_| file.corrupt("page number beyond 2^32"))?;
-        Ok(Some(Addr {
-            page,
-            offset: offset as u16,
-        }))
+        Ok(Some(Addr { page, offset: offset as u16 }))
     }
 }

@@ -26,17 +26,10 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let data = w.data;
     let nodes = data.node_fanout.len();
     let cap = w.cap();
-    let CellVPages {
-        addrs,
-        pages: vp_pages,
-        bytes: vp_bytes,
-    } = write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
+    let CellVPages { addrs, pages: vp_pages, bytes: vp_bytes } =
+        write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
 
-    let meta_len = Meta::encoded_len(
-        LayoutKind::IndexedVertical,
-        u64::from(data.cell_count),
-        nodes as u64,
-    );
+    let meta_len = Meta::encoded_len(LayoutKind::IndexedVertical, u64::from(data.cell_count), nodes as u64);
     let data_start = record_pages(meta_len, cap as u64);
     // Place the segments first (no writing) so the directory can go in the metadata.
     let mut dry = Packer::dry_run(cap, data_start);
@@ -65,11 +58,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
         fanout: data.node_fanout.clone(),
         directory,
     };
-    let mut p = Packer::new(PageFileWriter::create(
-        &w.dir.join(INDEX_FILE),
-        INDEX_TAG,
-        w.page_size,
-    )?);
+    let mut p = Packer::new(PageFileWriter::create(&w.dir.join(INDEX_FILE), INDEX_TAG, w.page_size)?);
     p.put(&meta.encode())?;
     p.align()?;
     let mut bytes = Vec::new();
@@ -84,10 +73,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     }
     let (_, ix_bytes) = p.finish()?;
     Ok(layout_size(
-        vec![
-            (INDEX_FILE.to_string(), ix_bytes),
-            (VPAGES_FILE.to_string(), vp_bytes),
-        ],
+        vec![(INDEX_FILE.to_string(), ix_bytes), (VPAGES_FILE.to_string(), vp_bytes)],
         vp_pages * u64::from(w.page_size),
     ))
 }
@@ -105,20 +91,12 @@ impl Reader {
         Ok(Self { seg: Vec::new() })
     }
 
-    pub fn flip(
-        &mut self,
-        meta: &Meta,
-        index: &mut PagedFile,
-        cell: u32,
-        bytes: &mut Vec<u8>,
-    ) -> Result<()> {
+    pub fn flip(&mut self, meta: &Meta, index: &mut PagedFile, cell: u32, bytes: &mut Vec<u8>) -> Result<()> {
         let (addr, count) = meta.directory[cell as usize];
         let len = (count as usize)
             .checked_mul(PAIR_BYTES)
             .filter(|&l| (l as u64) <= index.file.file_len())
-            .ok_or_else(|| {
-                index.corrupt(format!("cell {cell}: {count} visible nodes cannot fit"))
-            })?;
+            .ok_or_else(|| index.corrupt(format!("cell {cell}: {count} visible nodes cannot fit")))?;
         index.read_record(addr, len, bytes)?;
         self.seg.clear();
         let mut prev: Option<u32> = None;
@@ -127,9 +105,7 @@ impl Reader {
             let addr = Addr::decode(pair, 4).unwrap_or(Addr::NIL);
             if node >= meta.node_count || prev.is_some_and(|p| p >= node) {
                 self.seg.clear();
-                return Err(index.corrupt(format!(
-                    "cell {cell}: segment lists node {node} out of order or range"
-                )));
+                return Err(index.corrupt(format!("cell {cell}: segment lists node {node} out of order or range")));
             }
             prev = Some(node);
             self.seg.push((node, addr));
@@ -138,9 +114,6 @@ impl Reader {
     }
 
     pub fn locate(&self, node: u32) -> Option<Addr> {
-        self.seg
-            .binary_search_by_key(&node, |&(n, _)| n)
-            .ok()
-            .map(|i| self.seg[i].1)
+        self.seg.binary_search_by_key(&node, |&(n, _)| n).ok().map(|i| self.seg[i].1)
     }
 }

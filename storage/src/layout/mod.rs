@@ -36,11 +36,7 @@ pub enum LayoutKind {
 }
 
 impl LayoutKind {
-    pub const ALL: [LayoutKind; 3] = [
-        LayoutKind::Horizontal,
-        LayoutKind::Vertical,
-        LayoutKind::IndexedVertical,
-    ];
+    pub const ALL: [LayoutKind; 3] = [LayoutKind::Horizontal, LayoutKind::Vertical, LayoutKind::IndexedVertical];
 
     /// The name used on the command line and in file names.
     pub fn name(self) -> &'static str {
@@ -99,10 +95,7 @@ pub struct LayoutOptions {
 
 impl Default for LayoutOptions {
     fn default() -> Self {
-        Self {
-            page_size: 4096,
-            dov: DovCodec::F32,
-        }
+        Self { page_size: 4096, dov: DovCodec::F32 }
     }
 }
 
@@ -149,31 +142,17 @@ pub struct LayoutSummary {
 /// Writes the `kind` layout of `data` into the existing directory `dir`.
 ///
 /// V-pages whose entries are all (0, 0) are treated as invisible and not stored.
-pub fn write_layout(
-    dir: &Path,
-    kind: LayoutKind,
-    data: &VData,
-    opts: &LayoutOptions,
-) -> Result<LayoutSize> {
+pub fn write_layout(dir: &Path, kind: LayoutKind, data: &VData, opts: &LayoutOptions) -> Result<LayoutSize> {
     data.validate().map_err(|r| Error::invalid(dir, r))?;
     if !(MIN_PAGE_SIZE..=MAX_LAYOUT_PAGE_SIZE).contains(&opts.page_size) {
         return Err(Error::invalid(
             dir,
-            format!(
-                "page size {} outside {MIN_PAGE_SIZE}..={MAX_LAYOUT_PAGE_SIZE}",
-                opts.page_size
-            ),
+            format!("page size {} outside {MIN_PAGE_SIZE}..={MAX_LAYOUT_PAGE_SIZE}", opts.page_size),
         ));
     }
     let stats = data.stats();
     let codec = VPageCodec::new(opts.dov, stats.nvo_max);
-    let w = WriteCtx {
-        dir,
-        data,
-        stats,
-        codec,
-        page_size: opts.page_size,
-    };
+    let w = WriteCtx { dir, data, stats, codec, page_size: opts.page_size };
     match kind {
         LayoutKind::Horizontal => horizontal::write(&w),
         LayoutKind::Vertical => vertical::write(&w),
@@ -223,26 +202,16 @@ pub(crate) struct Meta {
 
 impl Meta {
     pub fn encoded_len(kind: LayoutKind, cells: u64, nodes: u64) -> u64 {
-        let dir = if kind == LayoutKind::IndexedVertical {
-            cells * DIR_ENTRY_BYTES as u64
-        } else {
-            0
-        };
+        let dir = if kind == LayoutKind::IndexedVertical { cells * DIR_ENTRY_BYTES as u64 } else { 0 };
         META_FIXED as u64 + 2 * nodes + dir
     }
 
     pub fn encode(&self) -> Vec<u8> {
-        let mut b = Vec::with_capacity(Meta::encoded_len(
-            self.kind,
-            u64::from(self.cell_count),
-            u64::from(self.node_count),
-        ) as usize);
-        b.extend_from_slice(&[
-            self.kind.code(),
-            self.codec.dov.code(),
-            self.codec.nvo_bytes,
-            0,
-        ]);
+        let mut b =
+            Vec::with_capacity(
+                Meta::encoded_len(self.kind, u64::from(self.cell_count), u64::from(self.node_count)) as usize
+            );
+        b.extend_from_slice(&[self.kind.code(), self.codec.dov.code(), self.codec.nvo_bytes, 0]);
         b.extend_from_slice(&self.cell_count.to_le_bytes());
         b.extend_from_slice(&self.node_count.to_le_bytes());
         b.extend_from_slice(&(self.data_start as u32).to_le_bytes());
@@ -271,14 +240,9 @@ impl Meta {
         file.read_record(Addr { page: 0, offset: 0 }, META_FIXED, &mut fixed)?;
         let bad = |r: String| Error::corrupt(file.path(), format!("layout metadata: {r}"));
         if fixed[0] != kind.code() {
-            return Err(bad(format!(
-                "layout code {}, expected {} ({kind})",
-                fixed[0],
-                kind.code()
-            )));
+            return Err(bad(format!("layout code {}, expected {} ({kind})", fixed[0], kind.code())));
         }
-        let dov = DovCodec::from_code(fixed[1])
-            .ok_or_else(|| bad(format!("unknown DoV codec {}", fixed[1])))?;
+        let dov = DovCodec::from_code(fixed[1]).ok_or_else(|| bad(format!("unknown DoV codec {}", fixed[1])))?;
         let nvo_bytes = fixed[2];
         if nvo_bytes != 2 && nvo_bytes != 4 {
             return Err(bad(format!("NVO width {nvo_bytes}, expected 2 or 4")));
@@ -363,10 +327,7 @@ impl fmt::Debug for LayoutReader {
 }
 
 fn open_paged(dir: &Path, name: &str, tag: [u8; 4], mode: ReadMode) -> Result<PagedFile> {
-    Ok(PagedFile::new(
-        PageFile::open(&dir.join(name), tag, mode)?,
-        name,
-    ))
+    Ok(PagedFile::new(PageFile::open(&dir.join(name), tag, mode)?, name))
 }
 
 impl LayoutReader {
@@ -402,14 +363,7 @@ impl LayoutReader {
                 meta.vpages_pages
             )));
         }
-        let mut r = Self {
-            meta,
-            index,
-            vpages,
-            state,
-            cell: None,
-            bytes: Vec::new(),
-        };
+        let mut r = Self { meta, index, vpages, state, cell: None, bytes: Vec::new() };
         r.reset_io();
         Ok(r)
     }
@@ -440,8 +394,7 @@ impl LayoutReader {
         let m = &self.meta;
         let cells = f64::from(m.cell_count.max(1));
         let page_size = self.vpages.file.page_size();
-        let bytes =
-            self.vpages.file.file_len() + self.index.as_ref().map_or(0, |i| i.file.file_len());
+        let bytes = self.vpages.file.file_len() + self.index.as_ref().map_or(0, |i| i.file.file_len());
         LayoutSummary {
             kind: m.kind,
             dov: m.codec.dov,
@@ -477,17 +430,12 @@ impl LayoutReader {
                 st.flip(&self.meta, ix, cell, &mut self.bytes)?;
             }
             State::Indexed(st) => {
-                let ix = self
-                    .index
-                    .as_mut()
-                    .expect("indexed-vertical has an index file");
+                let ix = self.index.as_mut().expect("indexed-vertical has an index file");
                 st.flip(&self.meta, ix, cell, &mut self.bytes)?;
             }
         }
         self.cell = Some(cell);
-        Ok(FlipCost {
-            pages_read: self.pages_read() - before,
-        })
+        Ok(FlipCost { pages_read: self.pages_read() - before })
     }
 
     /// The V-page of `node` in the selected cell; `None` if the node is invisible there.
@@ -501,10 +449,7 @@ impl LayoutReader {
     pub fn vpage_into(&mut self, node: u32, out: &mut Vec<VEntry>) -> Result<bool> {
         out.clear();
         let Some(cell) = self.cell else {
-            return Err(Error::invalid(
-                self.vpages.path(),
-                "no cell selected: call flip_to_cell first",
-            ));
+            return Err(Error::invalid(self.vpages.path(), "no cell selected: call flip_to_cell first"));
         };
         let Some(&fanout) = self.meta.fanout.get(node as usize) else {
             return Err(Error::invalid(
@@ -540,15 +485,9 @@ impl LayoutReader {
     pub fn io(&self) -> IoStats {
         let mut files = Vec::new();
         if let Some(ix) = &self.index {
-            files.push(FileIo {
-                file: ix.name().to_string(),
-                pages_read: ix.reads(),
-            });
+            files.push(FileIo { file: ix.name().to_string(), pages_read: ix.reads() });
         }
-        files.push(FileIo {
-            file: self.vpages.name().to_string(),
-            pages_read: self.vpages.reads(),
-        });
+        files.push(FileIo { file: self.vpages.name().to_string(), pages_read: self.vpages.reads() });
         IoStats { files }
     }
 
@@ -564,9 +503,5 @@ impl LayoutReader {
 /// Total length of the files named in `files` and the `LayoutSize` split.
 pub(crate) fn layout_size(files: Vec<(String, u64)>, vpage_bytes: u64) -> LayoutSize {
     let total: u64 = files.iter().map(|(_, b)| b).sum();
-    LayoutSize {
-        vpage_bytes,
-        index_bytes: total - vpage_bytes,
-        files,
-    }
+    LayoutSize { vpage_bytes, index_bytes: total - vpage_bytes, files }
 }

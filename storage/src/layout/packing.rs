@@ -23,10 +23,7 @@ pub(crate) const ADDR_BYTES: usize = 6;
 
 impl Addr {
     /// The nil pointer of the vertical layout: no V-page (the node is invisible).
-    pub const NIL: Addr = Addr {
-        page: u32::MAX,
-        offset: u16::MAX,
-    };
+    pub const NIL: Addr = Addr { page: u32::MAX, offset: u16::MAX };
 
     pub fn encode(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.page.to_le_bytes());
@@ -34,20 +31,13 @@ impl Addr {
     }
 
     pub fn decode(b: &[u8], at: usize) -> Option<Addr> {
-        Some(Addr {
-            page: u32_at(b, at)?,
-            offset: u16_at(b, at + 4)?,
-        })
+        Some(Addr { page: u32_at(b, at)?, offset: u16_at(b, at + 4)? })
     }
 }
 
 /// Pages that a record of `len` bytes occupies under the packing rule.
 pub(crate) fn record_pages(len: u64, cap: u64) -> u64 {
-    if len <= cap {
-        u64::from(len > 0)
-    } else {
-        len.div_ceil(cap)
-    }
+    if len <= cap { u64::from(len > 0) } else { len.div_ceil(cap) }
 }
 
 /// Where slot `i` of an array of equal-size records starting on page `first` lies, and how
@@ -96,22 +86,12 @@ pub(crate) struct Packer {
 impl Packer {
     pub fn new(writer: PageFileWriter) -> Self {
         let cap = writer.capacity();
-        Self {
-            writer: Some(writer),
-            cap,
-            cur: Vec::with_capacity(cap),
-            cur_page: 0,
-        }
+        Self { writer: Some(writer), cap, cur: Vec::with_capacity(cap), cur_page: 0 }
     }
 
     /// A packer that writes nothing: for computing addresses before writing.
     pub fn dry_run(cap: usize, first_page: u64) -> Self {
-        Self {
-            writer: None,
-            cap,
-            cur: Vec::new(),
-            cur_page: first_page,
-        }
+        Self { writer: None, cap, cur: Vec::new(), cur_page: first_page }
     }
 
     fn emit(&mut self, payload: Option<&[u8]>) -> Result<()> {
@@ -133,14 +113,8 @@ impl Packer {
     fn addr(&self, offset: usize) -> Result<Addr> {
         let page = u32::try_from(self.cur_page).ok().filter(|&p| p != u32::MAX);
         match page {
-            Some(page) => Ok(Addr {
-                page,
-                offset: offset as u16,
-            }),
-            None => Err(Error::Invalid {
-                path: "layout".into(),
-                reason: "more than 2^32 - 1 pages".into(),
-            }),
+            Some(page) => Ok(Addr { page, offset: offset as u16 }),
+            None => Err(Error::Invalid { path: "layout".into(), reason: "more than 2^32 - 1 pages".into() }),
         }
     }
 
@@ -199,12 +173,7 @@ pub(crate) struct PagedFile {
 
 impl PagedFile {
     pub fn new(file: PageFile, name: &str) -> Self {
-        Self {
-            file,
-            name: name.to_string(),
-            last: None,
-            page: Vec::new(),
-        }
+        Self { file, name: name.to_string(), last: None, page: Vec::new() }
     }
 
     pub fn name(&self) -> &str {
@@ -223,10 +192,7 @@ impl PagedFile {
         if self.last != Some(n) {
             self.last = None;
             if n >= self.file.page_count() {
-                return Err(self.corrupt(format!(
-                    "pointer to page {n}, file has {} pages",
-                    self.file.page_count()
-                )));
+                return Err(self.corrupt(format!("pointer to page {n}, file has {} pages", self.file.page_count())));
             }
             let p = self.file.page(n)?;
             self.page.clear();
@@ -247,27 +213,20 @@ impl PagedFile {
         let page = u64::from(addr.page);
         if len <= cap {
             if offset + len > cap {
-                return Err(self.corrupt(format!(
-                    "record of {len} bytes at page {page} offset {offset} crosses the page end"
-                )));
+                return Err(
+                    self.corrupt(format!("record of {len} bytes at page {page} offset {offset} crosses the page end"))
+                );
             }
             let p = self.load(page)?;
             out.extend_from_slice(&p[offset..offset + len]);
             return Ok(());
         }
         if offset != 0 {
-            return Err(self.corrupt(format!(
-                "multi-page record at page {page} starts at offset {offset}, not 0"
-            )));
+            return Err(self.corrupt(format!("multi-page record at page {page} starts at offset {offset}, not 0")));
         }
         let pages = len.div_ceil(cap) as u64;
-        if page
-            .checked_add(pages)
-            .is_none_or(|end| end > self.file.page_count())
-        {
-            return Err(self.corrupt(format!(
-                "record of {len} bytes at page {page} runs past the file's end"
-            )));
+        if page.checked_add(pages).is_none_or(|end| end > self.file.page_count()) {
+            return Err(self.corrupt(format!("record of {len} bytes at page {page} runs past the file's end")));
         }
         out.reserve(len);
         for i in 0..pages {

@@ -45,28 +45,17 @@ pub(crate) fn write_cell_vpages(w: &WriteCtx<'_>, path: &Path, tag: [u8; 4]) -> 
         addrs.push(a);
     }
     let (pages, bytes) = p.finish()?;
-    Ok(CellVPages {
-        addrs,
-        pages,
-        bytes,
-    })
+    Ok(CellVPages { addrs, pages, bytes })
 }
 
 pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let data = w.data;
     let nodes = data.node_fanout.len();
     let cap = w.cap() as u64;
-    let CellVPages {
-        addrs,
-        pages: vp_pages,
-        bytes: vp_bytes,
-    } = write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
+    let CellVPages { addrs, pages: vp_pages, bytes: vp_bytes } =
+        write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
 
-    let meta_len = Meta::encoded_len(
-        LayoutKind::Vertical,
-        u64::from(data.cell_count),
-        nodes as u64,
-    );
+    let meta_len = Meta::encoded_len(LayoutKind::Vertical, u64::from(data.cell_count), nodes as u64);
     let data_start = record_pages(meta_len, cap);
     let seg_len = (ADDR_BYTES * nodes) as u64;
     let flip = record_pages(seg_len, cap);
@@ -84,11 +73,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
         fanout: data.node_fanout.clone(),
         directory: Vec::new(),
     };
-    let mut p = Packer::new(PageFileWriter::create(
-        &w.dir.join(INDEX_FILE),
-        INDEX_TAG,
-        w.page_size,
-    )?);
+    let mut p = Packer::new(PageFileWriter::create(&w.dir.join(INDEX_FILE), INDEX_TAG, w.page_size)?);
     p.put(&meta.encode())?;
     p.align()?;
     let mut seg = vec![Addr::NIL; nodes];
@@ -106,10 +91,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     }
     let (_, ix_bytes) = p.finish()?;
     Ok(layout_size(
-        vec![
-            (INDEX_FILE.to_string(), ix_bytes),
-            (VPAGES_FILE.to_string(), vp_bytes),
-        ],
+        vec![(INDEX_FILE.to_string(), ix_bytes), (VPAGES_FILE.to_string(), vp_bytes)],
         vp_pages * u64::from(w.page_size),
     ))
 }
@@ -127,9 +109,7 @@ impl Reader {
             size: (ADDR_BYTES as u64) * u64::from(meta.node_count),
             cap: index.file.capacity() as u64,
         };
-        let end = segments
-            .pages(u64::from(meta.cell_count))
-            .and_then(|n| n.checked_add(meta.data_start));
+        let end = segments.pages(u64::from(meta.cell_count)).and_then(|n| n.checked_add(meta.data_start));
         if end != Some(index.file.page_count()) {
             return Err(index.corrupt(format!(
                 "{} segments of {} nodes do not fill the file's {} pages",
@@ -138,19 +118,10 @@ impl Reader {
                 index.file.page_count()
             )));
         }
-        Ok(Self {
-            segments,
-            seg: Vec::new(),
-        })
+        Ok(Self { segments, seg: Vec::new() })
     }
 
-    pub fn flip(
-        &mut self,
-        meta: &Meta,
-        index: &mut PagedFile,
-        cell: u32,
-        bytes: &mut Vec<u8>,
-    ) -> Result<()> {
+    pub fn flip(&mut self, meta: &Meta, index: &mut PagedFile, cell: u32, bytes: &mut Vec<u8>) -> Result<()> {
         let (page, offset) = self.segments.addr(u64::from(cell));
         let addr = Addr {
             page: u32::try_from(page).map_err(|_| index.corrupt("page number beyond 2^32"))?,
@@ -158,19 +129,12 @@ impl Reader {
         };
         index.read_record(addr, self.segments.size as usize, bytes)?;
         self.seg.clear();
-        self.seg.extend(
-            bytes
-                .chunks_exact(ADDR_BYTES)
-                .map(|c| Addr::decode(c, 0).unwrap_or(Addr::NIL)),
-        );
+        self.seg.extend(bytes.chunks_exact(ADDR_BYTES).map(|c| Addr::decode(c, 0).unwrap_or(Addr::NIL)));
         debug_assert_eq!(self.seg.len(), meta.node_count as usize);
         Ok(())
     }
 
     pub fn locate(&self, node: u32) -> Option<Addr> {
-        self.seg
-            .get(node as usize)
-            .copied()
-            .filter(|&a| a != Addr::NIL)
+        self.seg.get(node as usize).copied().filter(|&a| a != Addr::NIL)
     }
 }
