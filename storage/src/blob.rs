@@ -187,6 +187,23 @@ impl BlobFile {
         Ok(data)
     }
 
+    /// Reads every record, checking lengths and checksums, and that the records fill the data
+    /// exactly.
+    pub fn verify(&self) -> Result<()> {
+        let mut end = BLOB_HEADER_LEN as u64;
+        for r in self.iter() {
+            let (r, _) = r?;
+            end = r.offset + (RECORD_HEADER_LEN as u64) + u64::from(r.len);
+        }
+        if end != self.file_len() {
+            return Err(Error::corrupt(
+                &self.path,
+                format!("records end at byte {end}, data at {}", self.file_len()),
+            ));
+        }
+        Ok(())
+    }
+
     /// Every record in file order, each checked; stops at the first error.
     pub fn iter(&self) -> impl Iterator<Item = Result<(BlobRef, &[u8])>> + '_ {
         let mut offset = BLOB_HEADER_LEN as u64;

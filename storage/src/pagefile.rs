@@ -262,6 +262,11 @@ impl PageFile {
         })
     }
 
+    /// Reads every page, checking each checksum (counted like any read).
+    pub fn verify(&self) -> Result<()> {
+        (0..self.page_count).try_for_each(|n| self.page(n).map(drop))
+    }
+
     /// Page reads since open or the last [`reset_reads`](Self::reset_reads).
     pub fn reads(&self) -> u64 {
         self.reads.get()

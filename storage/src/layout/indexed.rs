@@ -113,6 +113,11 @@ impl Reader {
         Ok(())
     }
 
+    /// Nodes with a V-page in the selected cell.
+    pub fn pointed_nodes(&self) -> impl Iterator<Item = u32> + '_ {
+        self.seg.iter().map(|&(n, _)| n)
+    }
+
     pub fn locate(&self, node: u32) -> Option<Addr> {
         self.seg.binary_search_by_key(&node, |&(n, _)| n).ok().map(|i| self.seg[i].1)
     }

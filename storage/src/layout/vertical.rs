@@ -134,6 +134,11 @@ impl Reader {
         Ok(())
     }
 
+    /// Nodes with a V-page in the selected cell.
+    pub fn pointed_nodes(&self) -> impl Iterator<Item = u32> + '_ {
+        (0..self.seg.len() as u32).filter(|&n| self.seg[n as usize] != Addr::NIL)
+    }
+
     pub fn locate(&self, node: u32) -> Option<Addr> {
         self.seg.get(node as usize).copied().filter(|&a| a != Addr::NIL)
     }
