@@ -1,1 +1,158 @@
-//! (being written)
+//! Degree of visibility (DoV): how much of the sphere of directions around a point each object
+//! covers, measured by cubic projection (thesis §5.5.2, DESIGN.md §3).
+//!
+//! - [`cubemap`]: texel centres and solid-angle weights shared by both backends;
+//! - [`DovBackend`]: renders an *id cube* (one object id per texel) around a point; two
+//!   independent implementations, [`cpu::CpuBackend`] (ray casting over a BVH) and
+//!   [`gpu::GpuBackend`] (wgpu rasterisation), which must agree;
+//! - [`precompute`]: from-region DoV of objects and tree nodes for every cell of a view grid.
+
+pub mod cpu;
+pub mod cubemap;
+pub mod gpu;
+pub mod precompute;
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+pub use cpu::CpuBackend;
+pub use cubemap::CubeMap;
+pub use gpu::GpuBackend;
+
+use crate::error::Result;
+
+/// Id of a texel that sees no object.
+pub const NO_OBJECT: u32 = u32::MAX;
+/// Set in a texel's id when the nearest surface there is seen from behind (the point is inside or
+/// behind a closed mesh); the low bits are still the object id.
+pub const BACK_FACE_BIT: u32 = 1 << 31;
+/// Largest object index an id cube can carry (the top bit is [`BACK_FACE_BIT`]).
+pub const MAX_OBJECT_ID: u32 = BACK_FACE_BIT - 2;
+
+/// The per-texel result of one cube-map rendering: 6·R² ids, face-major, then rows top to
+/// bottom, then columns left to right (the layout of [`cubemap`]). Each id is an object index,
+/// possibly with [`BACK_FACE_BIT`] set, or [`NO_OBJECT`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdCube {
+    pub resolution: u32,
+    pub ids: Vec<u32>,
+}
+
+impl IdCube {
+    /// A cube of R×R×6 texels that see nothing.
+    pub fn new(resolution: u32) -> Self {
+        let r = resolution as usize;
+        Self { resolution, ids: vec![NO_OBJECT; 6 * r * r] }
+    }
+
+    /// The object seen through texel `index` (without the back-face flag), if any.
+    pub fn object_at(&self, index: usize) -> Option<u32> {
+        match self.ids[index] {
+            NO_OBJECT => None,
+            id => Some(id & !BACK_FACE_BIT),
+        }
+    }
+
+    /// Weighs every texel by its solid angle and sums per object (in f64, in texel order, so the
+    /// result is deterministic). Only objects with at least one texel appear. Costs O(R²) plus
+    /// one hash update per run of equal ids along a row.
+    ///
+    /// # Panics
+    /// If `cube` has another resolution.
+    pub fn dov(&self, cube: &CubeMap) -> PointDov {
+        assert_eq!(cube.resolution(), self.resolution, "id cube and cube map resolutions differ");
+        let weights = cube.face_weights();
+        let mut sums: HashMap<u32, f64> = HashMap::new();
+        let mut back_face = 0.0;
+        let mut empty = 0.0;
+        let r = self.resolution as usize;
+        for face in self.ids.chunks_exact(r * r) {
+            for (row_ids, row_w) in face.chunks_exact(r).zip(weights.chunks_exact(r)) {
+                // Runs of one id are long in real views: sum a run, then touch the map once.
+                let mut run_id = row_ids[0];
+                let mut run_sum = 0.0;
+                for (&id, &w) in row_ids.iter().zip(row_w) {
+                    if id != run_id {
+                        add_run(&mut sums, &mut back_face, &mut empty, run_id, run_sum);
+                        run_id = id;
+                        run_sum = 0.0;
+                    }
+                    run_sum += w;
+                }
+                add_run(&mut sums, &mut back_face, &mut empty, run_id, run_sum);
+            }
+        }
+        let total = cube.total_weight();
+        let mut objects: Vec<(u32, f64)> = sums.into_iter().map(|(id, s)| (id, s / total)).collect();
+        objects.sort_unstable_by_key(|&(id, _)| id);
+        PointDov { resolution: self.resolution, objects, back_face: back_face / total, empty: empty / total }
+    }
+}
+
+fn add_run(sums: &mut HashMap<u32, f64>, back_face: &mut f64, empty: &mut f64, id: u32, sum: f64) {
+    if id == NO_OBJECT {
+        *empty += sum;
+        return;
+    }
+    if id & BACK_FACE_BIT != 0 {
+        *back_face += sum;
+    }
+    *sums.entry(id & !BACK_FACE_BIT).or_insert(0.0) += sum;
+}
+
+/// The DoV of every object seen from one point, as fractions of the sphere of directions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointDov {
+    pub resolution: u32,
+    /// `(object index, DoV)`, sorted by object index, DoV > 0 only.
+    pub objects: Vec<(u32, f64)>,
+    /// Fraction of the sphere whose nearest surface is seen from behind. Near 0 for a point in
+    /// open space among closed meshes; near 1 for a point inside a building.
+    pub back_face: f64,
+    /// Fraction of the sphere that sees no object (sky).
+    pub empty: f64,
+}
+
+impl PointDov {
+    /// The DoV of `object`, 0 when it is not seen. O(log n).
+    pub fn get(&self, object: u32) -> f64 {
+        self.objects.binary_search_by_key(&object, |&(id, _)| id).map_or(0.0, |i| self.objects[i].1)
+    }
+
+    /// Sum over all objects: the covered fraction of the sphere, ≤ 1 up to rounding.
+    pub fn total(&self) -> f64 {
+        self.objects.iter().map(|&(_, d)| d).sum()
+    }
+}
+
+/// A way of rendering the id cube around a point. The resolution is fixed at construction.
+pub trait DovBackend {
+    /// Human-readable name, with the adapter for the GPU backend.
+    fn name(&self) -> String;
+
+    /// Texels per face edge (R).
+    fn resolution(&self) -> u32;
+
+    /// The cube map (texel centres and weights) this backend measures with.
+    fn cube_map(&self) -> &CubeMap;
+
+    /// Renders the id cube around `p` into `out` (which must have this backend's resolution):
+    /// for every texel, the nearest surface along the texel's centre direction beyond the near
+    /// plane. Equal depths go to the lower object id.
+    fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()>;
+
+    /// Point DoV of every object seen from `p`.
+    fn measure(&mut self, p: Vec3) -> Result<PointDov> {
+        let mut ids = IdCube::new(self.resolution());
+        self.render_ids(p, &mut ids)?;
+        Ok(ids.dov(self.cube_map()))
+    }
+}
+
+/// Distance of the near plane for a scene: 1e-4 of the scene's diagonal, at least 1e-4 (scene
+/// units). Surfaces nearer than this along a texel's forward depth are not seen by either backend.
+pub fn default_near(scene_bounds: &crate::geom::Aabb) -> f32 {
+    let diag = scene_bounds.extent().length();
+    if diag.is_finite() { (diag * 1e-4).max(1e-4) } else { 1e-4 }
+}

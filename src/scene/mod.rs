@@ -58,7 +58,7 @@ impl Mesh {
         if let Some(i) = self.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
             return Err(format!("vertex {i} has a non-finite coordinate {:?}", self.positions[i]));
         }
-        if self.indices.len() % 3 != 0 {
+        if !self.indices.len().is_multiple_of(3) {
             return Err(format!("{} indices is not a whole number of triangles", self.indices.len()));
         }
         let n = self.positions.len();

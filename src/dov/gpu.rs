@@ -1,0 +1,523 @@
+//! The GPU backend: wgpu rasterisation of the id cube map.
+//!
+//! All geometry is uploaded once, in world space relative to the scene's centre (f32 precision
+//! stays near the geometry), one vertex = position + object id. Objects lie in the index buffer in
+//! *descending* id order, so that (a) the objects that survive a face's frustum test form a few
+//! contiguous index ranges, one draw each, and (b) with a `GreaterEqual` reverse-Z depth test,
+//! the later-drawn lower id wins an exact depth tie — the CPU backend's tie rule.
+//!
+//! Each face is rendered into its own R32Uint 2D texture (copying 2D-array layers to a buffer
+//! reads back zeros on the GL backend), then all six are copied into one mapped buffer and
+//! weighed on the CPU with [`super::IdCube::dov`], exactly as the CPU backend's ids are.
+
+use std::sync::mpsc;
+
+use glam::{Mat4, Vec3, Vec4};
+use wgpu::util::DeviceExt;
+
+use super::cpu::{check_cube, check_point, check_resolution_and_near, world_triangles};
+use super::cubemap::{FACE_COUNT, face_basis};
+use super::{CubeMap, DovBackend, IdCube};
+use crate::error::{Error, Result};
+use crate::geom::Aabb;
+use crate::scene::Scene;
+
+/// Bytes between the six per-face uniform blocks (the largest `min_uniform_buffer_offset_alignment`
+/// wgpu allows).
+const UNIFORM_STRIDE: u64 = 256;
+
+/// Environment variable that makes the GPU tests fail instead of skip when no adapter exists.
+pub const REQUIRE_ADAPTER_ENV: &str = "HDOV_REQUIRE_ADAPTER";
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Vertex {
+    position: [f32; 3],
+    id: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FaceUniform {
+    clip_from_rel: [[f32; 4]; 4],
+    eye: [f32; 4],
+}
+
+/// The name of the adapter the GPU backend would use (e.g. "llvmpipe (LLVM 19.1.7, 256 bits) on
+/// Gl"), or `None` when wgpu finds none. Costs an instance and an adapter request.
+pub fn adapter_available() -> Option<String> {
+    let instance = new_instance();
+    let adapter = pollster::block_on(instance.request_adapter(&adapter_options())).ok()?;
+    Some(describe(&adapter.get_info()))
+}
+
+/// For tests: `true` when a GPU test can run. Without an adapter it prints `skipped: no adapter`
+/// and returns `false`, unless [`REQUIRE_ADAPTER_ENV`] is `1`, in which case it panics (CI sets it
+/// after installing Mesa, so a missing driver cannot pass silently).
+pub fn adapter_or_skip() -> bool {
+    if adapter_available().is_some() {
+        return true;
+    }
+    if std::env::var(REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") {
+        panic!("no wgpu adapter, and {REQUIRE_ADAPTER_ENV}=1 requires one");
+    }
+    println!("skipped: no adapter");
+    false
+}
+
+fn new_instance() -> wgpu::Instance {
+    // WGPU_BACKEND etc. may pick a backend (e.g. WGPU_BACKEND=gl to force llvmpipe through EGL).
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle().with_env())
+}
+
+fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {
+    wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: None,
+        apply_limit_buckets: false,
+    }
+}
+
+fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({}) on {:?}", info.name, info.driver_info, info.backend)
+}
+
+/// Rasterises the id cube around a point with wgpu. Construction uploads all geometry once and
+/// allocates the render targets; each [`DovBackend::render_ids`] does 6 render passes (objects
+/// culled per face by their boxes), one copy and one blocking read-back of 6·R²·4 bytes.
+pub struct GpuBackend {
+    cube: CubeMap,
+    near: f32,
+    adapter_name: String,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::RenderPipeline,
+    uniforms: wgpu::Buffer,
+    face_bind_groups: Vec<wgpu::BindGroup>,
+    vertices: Option<wgpu::Buffer>,
+    indices: Option<wgpu::Buffer>,
+    /// Index range of each object in the index buffer, in draw (descending id) order.
+    draw_ranges: Vec<std::ops::Range<u32>>,
+    /// Bounds of each object in draw order, relative to `origin`.
+    draw_bounds: Vec<Aabb>,
+    origin: Vec3,
+    face_targets: Vec<(wgpu::Texture, wgpu::TextureView)>,
+    depth_view: wgpu::TextureView,
+    readback: wgpu::Buffer,
+    padded_row_bytes: u32,
+}
+
+impl GpuBackend {
+    /// Opens an adapter and uploads `scene` for measurements at `resolution`, with the near
+    /// plane of [`super::default_near`]. Fails with [`Error::Gpu`] when no adapter or device can
+    /// be had, or the scene or resolution exceed the device's limits.
+    pub fn new(scene: &Scene, resolution: u32) -> Result<Self> {
+        Self::with_near(scene, resolution, super::default_near(&scene.bounds()))
+    }
+
+    /// As [`GpuBackend::new`] with an explicit near distance along each face's forward axis.
+    pub fn with_near(scene: &Scene, resolution: u32, near: f32) -> Result<Self> {
+        check_resolution_and_near(resolution, near)?;
+        let instance = new_instance();
+        let adapter = pollster::block_on(instance.request_adapter(&adapter_options()))
+            .map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
+        let adapter_name = describe(&adapter.get_info());
+        let limits = adapter.limits();
+        if resolution > limits.max_texture_dimension_2d {
+            return Err(Error::Gpu(format!(
+                "resolution {resolution} exceeds the adapter's texture limit {}",
+                limits.max_texture_dimension_2d
+            )));
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("hdov dov"),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| Error::Gpu(format!("{adapter_name}: no device: {e}")))?;
+
+        let origin = scene.bounds().center();
+        let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
+        let geometry = Geometry::build(scene, origin)?;
+        let max_buffer = limits.max_buffer_size;
+        let vertex_bytes = (geometry.vertices.len() * std::mem::size_of::<Vertex>()) as u64;
+        if vertex_bytes > max_buffer || (geometry.indices.len() * 4) as u64 > max_buffer {
+            return Err(Error::Gpu(format!(
+                "{adapter_name}: the scene's {vertex_bytes} vertex bytes exceed the buffer limit {max_buffer}"
+            )));
+        }
+        let vertices = (!geometry.vertices.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("dov vertices"),
+                contents: bytemuck::cast_slice(&geometry.vertices),
+                usage: wgpu::BufferUsages::VERTEX,
+            })
+        });
+        let indices = (!geometry.indices.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("dov indices"),
+                contents: bytemuck::cast_slice(&geometry.indices),
+                usage: wgpu::BufferUsages::INDEX,
+            })
+        });
+
+        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("dov face uniforms"),
+            size: UNIFORM_STRIDE * FACE_COUNT as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("dov face"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FaceUniform>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let face_bind_groups = (0..FACE_COUNT as u64)
+            .map(|f| {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("dov face"),
+                    layout: &bind_layout,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &uniforms,
+                            offset: f * UNIFORM_STRIDE,
+                            size: wgpu::BufferSize::new(std::mem::size_of::<FaceUniform>() as u64),
+                        }),
+                    }],
+                })
+            })
+            .collect();
+        let pipeline = create_pipeline(&device, &bind_layout);
+
+        let extent = wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 };
+        let face_targets = (0..FACE_COUNT)
+            .map(|_| {
+                let texture = device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("dov id face"),
+                    size: extent,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::R32Uint,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                });
+                let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+                (texture, view)
+            })
+            .collect();
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("dov depth"),
+            size: extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Depth32Float,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+        let padded_row_bytes = (resolution * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("dov readback"),
+            size: padded_row_bytes as u64 * resolution as u64 * FACE_COUNT as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(Self {
+            cube: CubeMap::new(resolution),
+            near,
+            adapter_name,
+            device,
+            queue,
+            pipeline,
+            uniforms,
+            face_bind_groups,
+            vertices,
+            indices,
+            draw_ranges: geometry.draw_ranges,
+            draw_bounds: geometry.draw_bounds,
+            origin,
+            face_targets,
+            depth_view,
+            readback,
+            padded_row_bytes,
+        })
+    }
+
+    /// The adapter's name, driver and backend, e.g. "llvmpipe (...) on Vulkan".
+    pub fn adapter_name(&self) -> &str {
+        &self.adapter_name
+    }
+
+    pub fn near(&self) -> f32 {
+        self.near
+    }
+
+    /// Index ranges to draw for one face: objects whose box may reach into the face's frustum,
+    /// consecutive ones merged. Conservative: a box is dropped only when it lies wholly outside
+    /// one of the frustum's planes (or wholly nearer than the near plane).
+    fn visible_ranges(&self, face: usize, eye: Vec3) -> Vec<std::ops::Range<u32>> {
+        let b = face_basis(face);
+        // Inside the frustum: n·d ≥ 0 for each side normal, forward·d ≥ near.
+        let sides = [b.forward - b.right, b.forward + b.right, b.forward - b.up, b.forward + b.up];
+        let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
+        for (range, bounds) in self.draw_ranges.iter().zip(&self.draw_bounds) {
+            if range.is_empty() {
+                continue;
+            }
+            let centre = bounds.center() - eye;
+            let half = bounds.extent() * 0.5;
+            // The box's largest value of n·d; slack covers rounding at the planes.
+            let reach = |n: Vec3| n.dot(centre) + n.abs().dot(half);
+            let slack = 1e-5 * (centre.length() + half.length());
+            let outside = sides.iter().any(|&n| reach(n) < -slack) || reach(b.forward) < self.near - slack;
+            if outside {
+                continue;
+            }
+            match ranges.last_mut() {
+                Some(last) if last.end == range.start => last.end = range.end,
+                _ => ranges.push(range.clone()),
+            }
+        }
+        ranges
+    }
+}
+
+/// The scene as one vertex and one index buffer, objects in descending id order.
+struct Geometry {
+    vertices: Vec<Vertex>,
+    indices: Vec<u32>,
+    draw_ranges: Vec<std::ops::Range<u32>>,
+    draw_bounds: Vec<Aabb>,
+}
+
+impl Geometry {
+    fn build(scene: &Scene, origin: Vec3) -> Result<Self> {
+        let (triangles, objects) = world_triangles(scene)?;
+        // Triangles are grouped by object in ascending order; walk the groups backwards.
+        let mut starts = vec![0usize; scene.objects.len() + 1];
+        for &o in &objects {
+            starts[o as usize + 1] += 1;
+        }
+        for i in 1..starts.len() {
+            starts[i] += starts[i - 1];
+        }
+        let mut vertices = Vec::with_capacity(triangles.len() * 3);
+        let mut draw_ranges = Vec::with_capacity(scene.objects.len());
+        let mut draw_bounds = Vec::with_capacity(scene.objects.len());
+        for object in (0..scene.objects.len()).rev() {
+            let first = vertices.len() as u32;
+            let mut bounds = Aabb::EMPTY;
+            for t in &triangles[starts[object]..starts[object + 1]] {
+                for p in t {
+                    let rel = *p - origin;
+                    bounds = bounds.grow(rel);
+                    vertices.push(Vertex { position: rel.to_array(), id: object as u32 });
+                }
+            }
+            draw_ranges.push(first..vertices.len() as u32);
+            draw_bounds.push(bounds);
+        }
+        if vertices.len() > u32::MAX as usize {
+            return Err(Error::Gpu(format!("{} vertices exceed u32 indices", vertices.len())));
+        }
+        // Triangles are unshared (each object's world copy), so the index buffer is the identity;
+        // it exists so that draws are index ranges and a later LOD-aware drawing can share vertices.
+        let indices = (0..vertices.len() as u32).collect();
+        Ok(Self { vertices, indices, draw_ranges, draw_bounds })
+    }
+}
+
+fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
+    let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("dov id cube"),
+        source: wgpu::ShaderSource::Wgsl(include_str!("gpu.wgsl").into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("dov id cube"),
+        bind_group_layouts: &[Some(bind_layout)],
+        immediate_size: 0,
+    });
+    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("dov id cube"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &shader,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            // Both sides are drawn: back faces are visible surfaces too (and flagged).
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: wgpu::TextureFormat::Depth32Float,
+            depth_write_enabled: Some(true),
+            // Reverse Z: larger is nearer. Equal depth: the later draw (lower id) wins.
+            depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &shader,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: wgpu::TextureFormat::R32Uint,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// The matrix taking `position − eye` to clip space for one face: x = right·d, y = up·d,
+/// z = near, w = forward·d. So NDC (x, y) is the cube map's (u, v) and depth is `near/forward·d`
+/// (reverse Z, 1 at the near plane, → 0 at infinity).
+fn clip_from_rel(face: usize, near: f32) -> Mat4 {
+    let b = face_basis(face);
+    Mat4::from_cols(b.right.extend(0.0), b.up.extend(0.0), Vec4::new(0.0, 0.0, 0.0, near), b.forward.extend(0.0))
+        .transpose()
+}
+
+impl DovBackend for GpuBackend {
+    fn name(&self) -> String {
+        format!("gpu ({})", self.adapter_name)
+    }
+
+    fn resolution(&self) -> u32 {
+        self.cube.resolution()
+    }
+
+    fn cube_map(&self) -> &CubeMap {
+        &self.cube
+    }
+
+    fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        check_point(p)?;
+        let r = self.cube.resolution();
+        check_cube(out, r)?;
+        let eye = p - self.origin;
+        for face in 0..FACE_COUNT {
+            let u = FaceUniform {
+                clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
+                eye: eye.extend(0.0).to_array(),
+            };
+            self.queue.write_buffer(&self.uniforms, face as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
+        }
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
+        for face in 0..FACE_COUNT {
+            let ranges = self.visible_ranges(face, eye);
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("dov face"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.face_targets[face].1,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        // NO_OBJECT = u32::MAX, exactly representable in the f64 clear value.
+                        load: wgpu::LoadOp::Clear(wgpu::Color { r: u32::MAX as f64, g: 0.0, b: 0.0, a: 0.0 }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.depth_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if let (Some(vertices), Some(indices)) = (&self.vertices, &self.indices)
+                && !ranges.is_empty()
+            {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.face_bind_groups[face], &[]);
+                pass.set_vertex_buffer(0, vertices.slice(..));
+                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                for range in ranges {
+                    pass.draw_indexed(range, 0, 0..1);
+                }
+            }
+        }
+        for (face, (texture, _)) in self.face_targets.iter().enumerate() {
+            encoder.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &self.readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: face as u64 * self.padded_row_bytes as u64 * r as u64,
+                        bytes_per_row: Some(self.padded_row_bytes),
+                        rows_per_image: Some(r),
+                    },
+                },
+                wgpu::Extent3d { width: r, height: r, depth_or_array_layers: 1 },
+            );
+        }
+        self.queue.submit([encoder.finish()]);
+        self.read_back(out)
+    }
+}
+
+impl GpuBackend {
+    /// Maps the read-back buffer (blocking until the GPU is done) and strips the row padding.
+    fn read_back(&self, out: &mut IdCube) -> Result<()> {
+        let slice = self.readback.slice(..);
+        let (sender, receiver) = mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |result| {
+            // The receiver outlives the poll below; a failed send only means it gave up.
+            let _ = sender.send(result);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu(format!("{}: poll: {e}", self.adapter_name)))?;
+        receiver
+            .recv()
+            .map_err(|e| Error::Gpu(format!("{}: map callback lost: {e}", self.adapter_name)))?
+            .map_err(|e| Error::Gpu(format!("{}: map: {e}", self.adapter_name)))?;
+        {
+            let data = slice
+                .get_mapped_range()
+                .map_err(|e| Error::Gpu(format!("{}: mapped range: {e}", self.adapter_name)))?;
+            let r = self.cube.resolution() as usize;
+            let row_bytes = r * 4;
+            for (dst, src) in out.ids.chunks_exact_mut(r).zip(data.chunks_exact(self.padded_row_bytes as usize)) {
+                for (d, s) in dst.iter_mut().zip(src[..row_bytes].chunks_exact(4)) {
+                    *d = u32::from_le_bytes([s[0], s[1], s[2], s[3]]);
+                }
+            }
+        }
+        self.readback.unmap();
+        Ok(())
+    }
+}

@@ -1,0 +1,372 @@
+//! From-region DoV for every cell of a view grid (thesis §5.2, §5.5; DESIGN.md §3).
+//!
+//! Per cell, the sample points are its 8 corners (shared with the neighbouring cells and measured
+//! once each) plus, optionally, K interior points. Then:
+//! - object DoV = max over the sample points of the point DoV;
+//! - node DoV = max over the sample points of the *sum* of the point DoVs of the objects under the
+//!   node (the max of sums, which stays ≤ 1; not the sum of maxima);
+//! - NVO = number of objects under the node whose cell DoV is > 0;
+//! - *visible zero-DoV* objects (§5.5.2): objects no sample point sees but whose box lies within
+//!   [`PrecomputeOptions::zero_dov_margin`] of the cell get the one-texel floor
+//!   [`CubeMap::texel_floor`], so that a query still fetches them (at a coarse LOD).
+//!
+//! Work can be split into shards of disjoint cells ([`Shard`]); their outputs merge by
+//! concatenation.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+use super::{CubeMap, DovBackend, PointDov};
+use crate::error::{Error, Result};
+use crate::geom::Aabb;
+use crate::grid::ViewGrid;
+
+/// The shape of the object tree, as far as DoV aggregation needs it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TreeShape {
+    /// Leaf node id of each object.
+    pub object_leaf: Vec<u32>,
+    /// Parent of each node id (`None` for the root).
+    pub node_parent: Vec<Option<u32>>,
+}
+
+impl TreeShape {
+    /// Checks that every id is in range and every node reaches a root (no cycles). O(nodes·depth).
+    pub fn check(&self, objects: usize) -> Result<()> {
+        let nodes = self.node_parent.len();
+        if self.object_leaf.len() != objects {
+            return Err(Error::bad_arg(
+                "tree shape",
+                format!("{} object leaves for {objects} objects", self.object_leaf.len()),
+            ));
+        }
+        if let Some(&bad) = self.object_leaf.iter().find(|&&l| l as usize >= nodes) {
+            return Err(Error::bad_arg("tree shape", format!("leaf {bad} out of range ({nodes} nodes)")));
+        }
+        for start in 0..nodes {
+            let mut node = start;
+            for step in 0..=nodes {
+                match self.node_parent[node] {
+                    None => break,
+                    Some(p) if (p as usize) < nodes && step < nodes => node = p as usize,
+                    Some(p) => {
+                        return Err(Error::bad_arg(
+                            "tree shape",
+                            format!("node {start}: parent {p} out of range or a cycle"),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The node ids on the path from `object`'s leaf up to the root, leaf first.
+    pub fn ancestors(&self, object: u32) -> impl Iterator<Item = u32> + '_ {
+        std::iter::successors(Some(self.object_leaf[object as usize]), |&n| self.node_parent[n as usize])
+    }
+}
+
+/// The precomputed visibility of one cell. Only entries > 0 are stored.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CellDov {
+    /// `(object index, DoV)`, ascending object index.
+    pub objects: Vec<(u32, f32)>,
+    /// `(node id, DoV, NVO)`, ascending node id.
+    pub nodes: Vec<(u32, f32, u32)>,
+    /// How many of `objects` got the visible-zero-DoV floor.
+    pub floored: u32,
+    /// Sample points left out because they lie inside geometry (see
+    /// [`PrecomputeOptions::skip_inside_points`]).
+    pub skipped_points: u32,
+}
+
+impl CellDov {
+    /// The DoV of `object` (0 when absent). O(log n).
+    pub fn object(&self, object: u32) -> f32 {
+        self.objects.binary_search_by_key(&object, |e| e.0).map_or(0.0, |i| self.objects[i].1)
+    }
+
+    /// `(DoV, NVO)` of `node` ((0, 0) when absent). O(log n).
+    pub fn node(&self, node: u32) -> (f32, u32) {
+        self.nodes.binary_search_by_key(&node, |e| e.0).map_or((0.0, 0), |i| (self.nodes[i].1, self.nodes[i].2))
+    }
+}
+
+/// Part `index` of `count` of a grid's cells: the contiguous cell-id range
+/// `[index·C/count, (index+1)·C/count)`. Contiguous ranges keep most corners inside one shard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl Shard {
+    /// The whole grid.
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// Parses `I/N` (0 ≤ I < N), the CLI's `--shard` value.
+    pub fn parse(s: &str) -> Result<Shard> {
+        let bad = |why: &str| Error::bad_arg("--shard", format!("'{s}': {why}"));
+        let (i, n) = s.split_once('/').ok_or_else(|| bad("expected I/N"))?;
+        let index: u32 = i.trim().parse().map_err(|_| bad("I is not a number"))?;
+        let count: u32 = n.trim().parse().map_err(|_| bad("N is not a number"))?;
+        if count == 0 || index >= count {
+            return Err(bad("need 0 ≤ I < N"));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The cell ids of this shard.
+    pub fn cells(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
+        let c = grid.cell_count() as u64;
+        let lo = c * self.index as u64 / self.count as u64;
+        let hi = c * (self.index as u64 + 1) / self.count as u64;
+        lo as usize..hi as usize
+    }
+}
+
+/// Options of a precomputation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrecomputeOptions {
+    /// Interior sample points per cell besides the 8 corners (Halton points in bases 2, 3, 5:
+    /// well spread, the same relative positions in every cell). 0 = corners only (the thesis).
+    pub interior_samples: u32,
+    /// An object that no sample point sees gets the one-texel floor DoV when its box lies within
+    /// this distance of the cell's box. `None` disables the floor.
+    pub zero_dov_margin: Option<f32>,
+    /// Leave out sample points whose view is mostly back faces (more than half the sphere): they
+    /// lie inside a closed mesh and would give its walls a DoV near 1. When all points of a cell
+    /// are inside, they are all kept.
+    pub skip_inside_points: bool,
+}
+
+impl Default for PrecomputeOptions {
+    fn default() -> Self {
+        Self { interior_samples: 0, zero_dov_margin: Some(0.0), skip_inside_points: true }
+    }
+}
+
+/// The output of one shard.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ShardDov {
+    /// `(cell id, visibility)` for every cell of the shard, ascending id.
+    pub cells: Vec<(u32, CellDov)>,
+    /// Point measurements done (distinct corners + interior points of the shard).
+    pub points_measured: usize,
+    /// Cube-map resolution of the measurements.
+    pub resolution: u32,
+}
+
+/// The `k`-th (k ≥ 1) point of the Halton sequence in bases 2, 3, 5, in [0, 1)³.
+pub fn halton3(k: u32) -> Vec3 {
+    fn radical_inverse(mut k: u32, base: u32) -> f32 {
+        let (mut inv, mut f) = (0.0f64, 1.0f64 / base as f64);
+        while k > 0 {
+            inv += f * (k % base) as f64;
+            k /= base;
+            f /= base as f64;
+        }
+        inv as f32
+    }
+    Vec3::new(radical_inverse(k, 2), radical_inverse(k, 3), radical_inverse(k, 5))
+}
+
+/// The `count` interior sample points of a cell box (see [`PrecomputeOptions::interior_samples`]).
+pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
+    (1..=count).map(|k| cell.min + halton3(k) * cell.extent()).collect()
+}
+
+/// Computes the [`CellDov`] of every cell of `shard`.
+///
+/// Every corner that a shard cell uses is measured exactly once (kept until its last cell is
+/// done, so memory holds about two layers of corners), interior points once per cell. `progress`
+/// is called with `(points done, points total)` after each measurement. Costs (distinct corners
+/// + K·cells) backend measurements plus, per cell, O(visible objects × tree depth × points).
+pub fn precompute_shard(
+    backend: &mut dyn DovBackend,
+    grid: &ViewGrid,
+    object_bounds: &[Aabb],
+    shape: &TreeShape,
+    options: &PrecomputeOptions,
+    shard: Shard,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ShardDov> {
+    grid.check().map_err(|r| Error::bad_arg("grid", r))?;
+    shape.check(object_bounds.len())?;
+    if shard.count == 0 || shard.index >= shard.count {
+        return Err(Error::bad_arg("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
+    }
+    let cells = shard.cells(grid);
+    // How many shard cells still need each corner: drop a corner's DoV after its last cell.
+    let mut corner_uses: HashMap<usize, u32> = HashMap::new();
+    for id in cells.clone() {
+        for c in grid.cell_corners(grid.cell_coords(id)) {
+            *corner_uses.entry(c).or_insert(0) += 1;
+        }
+    }
+    let total = corner_uses.len() + cells.len() * options.interior_samples as usize;
+    let mut done = 0;
+    let mut corner_dov: HashMap<usize, PointDov> = HashMap::new();
+    let cube = backend.cube_map().clone();
+    let mut out =
+        ShardDov { cells: Vec::with_capacity(cells.len()), points_measured: 0, resolution: cube.resolution() };
+    for id in cells {
+        let coords = grid.cell_coords(id);
+        let cell_box = grid.cell_box(coords);
+        let mut points: Vec<PointDov> = Vec::with_capacity(8 + options.interior_samples as usize);
+        for corner in grid.cell_corners(coords) {
+            let dov = match corner_dov.get(&corner) {
+                Some(d) => d.clone(),
+                None => {
+                    let d = backend.measure(grid.corner_position(grid.corner_coords(corner)))?;
+                    done += 1;
+                    progress(done, total);
+                    corner_dov.insert(corner, d.clone());
+                    d
+                }
+            };
+            let uses = corner_uses.get_mut(&corner).expect("every corner of a shard cell is counted");
+            *uses -= 1;
+            if *uses == 0 {
+                corner_dov.remove(&corner);
+            }
+            points.push(dov);
+        }
+        for p in interior_points(&cell_box, options.interior_samples) {
+            points.push(backend.measure(p)?);
+            done += 1;
+            progress(done, total);
+        }
+        out.cells.push((id as u32, cell_dov(&points, &cell_box, object_bounds, shape, options, &cube)));
+    }
+    out.points_measured = done;
+    Ok(out)
+}
+
+/// Combines the point DoVs of one cell's sample points into its [`CellDov`] (see the module
+/// documentation for the rules). Pure; O(Σ visible objects per point × tree depth).
+pub fn cell_dov(
+    points: &[PointDov],
+    cell_box: &Aabb,
+    object_bounds: &[Aabb],
+    shape: &TreeShape,
+    options: &PrecomputeOptions,
+    cube: &CubeMap,
+) -> CellDov {
+    let inside = |p: &&PointDov| options.skip_inside_points && p.back_face > 0.5;
+    let skipped = points.iter().filter(inside).count();
+    let keep_all = skipped == points.len();
+    let used: Vec<&PointDov> = points.iter().filter(|p| keep_all || !inside(p)).collect();
+
+    let mut object_max: HashMap<u32, f64> = HashMap::new();
+    let mut node_max: HashMap<u32, f64> = HashMap::new();
+    let mut node_sum: HashMap<u32, f64> = HashMap::new();
+    for p in &used {
+        node_sum.clear();
+        for &(object, dov) in &p.objects {
+            let m = object_max.entry(object).or_insert(0.0);
+            *m = m.max(dov);
+            for node in shape.ancestors(object) {
+                *node_sum.entry(node).or_insert(0.0) += dov;
+            }
+        }
+        for (&node, &sum) in &node_sum {
+            let m = node_max.entry(node).or_insert(0.0);
+            *m = m.max(sum);
+        }
+    }
+
+    let mut floored = 0;
+    if let Some(margin) = options.zero_dov_margin {
+        let near = Aabb::new(cell_box.min - Vec3::splat(margin), cell_box.max + Vec3::splat(margin));
+        let floor = cube.texel_floor();
+        for (object, bounds) in object_bounds.iter().enumerate() {
+            let object = object as u32;
+            if !bounds.is_empty() && bounds.intersects(&near) && !object_max.contains_key(&object) {
+                object_max.insert(object, floor);
+                floored += 1;
+                // Keep node DoV ≥ every object DoV below it (queries prune by node DoV).
+                for node in shape.ancestors(object) {
+                    let m = node_max.entry(node).or_insert(0.0);
+                    *m = m.max(floor);
+                }
+            }
+        }
+    }
+
+    let mut nvo: HashMap<u32, u32> = HashMap::new();
+    for &object in object_max.keys() {
+        for node in shape.ancestors(object) {
+            *nvo.entry(node).or_insert(0) += 1;
+        }
+    }
+    let mut objects: Vec<(u32, f32)> = object_max.into_iter().map(|(o, d)| (o, positive_f32(d))).collect();
+    objects.sort_unstable_by_key(|e| e.0);
+    let mut nodes: Vec<(u32, f32, u32)> =
+        node_max.into_iter().map(|(n, d)| (n, positive_f32(d), nvo.get(&n).copied().unwrap_or(0))).collect();
+    nodes.sort_unstable_by_key(|e| e.0);
+    CellDov { objects, nodes, floored, skipped_points: if keep_all { 0 } else { skipped as u32 } }
+}
+
+/// `d` as f32, never rounded down to 0 (an entry that exists means "visible") and never above 1.
+fn positive_f32(d: f64) -> f32 {
+    (d as f32).clamp(f32::MIN_POSITIVE, 1.0)
+}
+
+/// How well corner sampling and the zero-DoV floor match dense sampling, over some cells.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ZeroDovAudit {
+    pub cells: usize,
+    /// (cell, object) pairs seen by some corner.
+    pub corner_visible: usize,
+    /// Pairs seen by some dense interior point but by no corner: the visible zero-DoV objects.
+    pub zero_dov: usize,
+    /// Of those, how many the floor test catches.
+    pub caught: usize,
+    /// Pairs the floor test adds that no dense point sees either (harmless over-fetching).
+    pub false_floors: usize,
+}
+
+/// Measures, for each cell in `cells`, which objects `dense` Halton interior points see that the
+/// corners do not, and how many of those the floor test with `margin` catches. Costs
+/// (8 + dense) measurements per cell (corners are not shared here: this is an audit).
+pub fn audit_zero_dov(
+    backend: &mut dyn DovBackend,
+    grid: &ViewGrid,
+    object_bounds: &[Aabb],
+    cells: impl IntoIterator<Item = usize>,
+    dense: u32,
+    margin: f32,
+) -> Result<ZeroDovAudit> {
+    let mut audit = ZeroDovAudit::default();
+    for id in cells {
+        let coords = grid.cell_coords(id);
+        let cell_box = grid.cell_box(coords);
+        let mut by_corner = std::collections::HashSet::new();
+        for c in grid.cell_corners(coords) {
+            let d = backend.measure(grid.corner_position(grid.corner_coords(c)))?;
+            by_corner.extend(d.objects.iter().map(|e| e.0));
+        }
+        let mut by_dense = by_corner.clone();
+        for p in interior_points(&cell_box, dense) {
+            by_dense.extend(backend.measure(p)?.objects.iter().map(|e| e.0));
+        }
+        let near = Aabb::new(cell_box.min - Vec3::splat(margin), cell_box.max + Vec3::splat(margin));
+        audit.cells += 1;
+        audit.corner_visible += by_corner.len();
+        for (object, bounds) in object_bounds.iter().enumerate() {
+            let object = object as u32;
+            if by_corner.contains(&object) {
+                continue;
+            }
+            let floored = !bounds.is_empty() && bounds.intersects(&near);
+            let seen = by_dense.contains(&object);
+            audit.zero_dov += seen as usize;
+            audit.caught += (seen && floored) as usize;
+            audit.false_floors += (floored && !seen) as usize;
+        }
+    }
+    Ok(audit)
+}

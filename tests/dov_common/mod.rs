@@ -1,0 +1,197 @@
+//! Scenes built in code for the DoV tests: tessellated spheres, boxes, walls with holes.
+#![allow(dead_code)]
+
+use glam::{Mat4, Vec3};
+use hdov::scene::{BaseMesh, Mesh, Object, Scene};
+
+/// An icosphere of radius 1 around the origin, `subdivisions` times refined (20·4^s triangles),
+/// counter-clockwise seen from outside.
+pub fn icosphere(subdivisions: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ]
+    .iter()
+    .map(|p| Vec3::from(*p).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut midpoints = std::collections::HashMap::new();
+        let mut mid = |a: u32, b: u32, positions: &mut Vec<Vec3>| -> u32 {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                positions.push(((positions[a as usize] + positions[b as usize]) * 0.5).normalize());
+                positions.len() as u32 - 1
+            })
+        };
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        for [a, b, c] in faces {
+            let ab = mid(a, b, &mut positions);
+            let bc = mid(b, c, &mut positions);
+            let ca = mid(c, a, &mut positions);
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    let mesh = Mesh {
+        positions: positions.iter().map(|p| p.to_array()).collect(),
+        indices: faces.into_iter().flatten().collect(),
+    };
+    assert_outward(&mesh);
+    mesh
+}
+
+fn assert_outward(mesh: &Mesh) {
+    for [a, b, c] in mesh.triangles() {
+        let n = (b - a).cross(c - a);
+        assert!(n.dot(a + b + c) > 0.0, "test mesh triangle is not counter-clockwise from outside");
+    }
+}
+
+/// The unit cube [-0.5, 0.5]³, 12 triangles, counter-clockwise seen from outside.
+pub fn unit_cube() -> Mesh {
+    let positions: Vec<[f32; 3]> = (0..8)
+        .map(|i| {
+            [
+                if i & 1 == 0 { -0.5 } else { 0.5 },
+                if i & 2 == 0 { -0.5 } else { 0.5 },
+                if i & 4 == 0 { -0.5 } else { 0.5 },
+            ]
+        })
+        .collect();
+    let quads = [
+        [0, 4, 6, 2], // -x
+        [1, 3, 7, 5], // +x
+        [0, 1, 5, 4], // -y
+        [2, 6, 7, 3], // +y
+        [0, 2, 3, 1], // -z
+        [4, 5, 7, 6], // +z
+    ];
+    let indices = quads.iter().flat_map(|&[a, b, c, d]| [a, b, c, a, c, d]).collect();
+    let mesh = Mesh { positions, indices };
+    assert_outward(&mesh);
+    mesh
+}
+
+/// A scene builder: each added object gets the next index.
+#[derive(Default)]
+pub struct SceneBuilder {
+    pub scene: Scene,
+}
+
+impl SceneBuilder {
+    pub fn mesh(&mut self, name: &str, mesh: Mesh) -> u32 {
+        self.scene.meshes.push(BaseMesh { name: name.into(), mesh });
+        self.scene.meshes.len() as u32 - 1
+    }
+
+    pub fn object(&mut self, mesh: u32, transform: Mat4) -> u32 {
+        let id = self.scene.objects.len();
+        self.scene.objects.push(Object { name: format!("o{id}"), mesh, transform });
+        id as u32
+    }
+
+    /// An axis-aligned box object with the given corners.
+    pub fn aabox(&mut self, min: Vec3, max: Vec3) -> u32 {
+        let cube = match self.scene.meshes.iter().position(|m| m.name == "cube") {
+            Some(i) => i as u32,
+            None => self.mesh("cube", unit_cube()),
+        };
+        self.object(cube, Mat4::from_scale_rotation_translation(max - min, glam::Quat::IDENTITY, (min + max) * 0.5))
+    }
+
+    pub fn build(self) -> Scene {
+        self.scene.check().expect("test scene is valid");
+        self.scene
+    }
+}
+
+/// A sphere scene: one icosphere of radius `r` at `centre`.
+pub fn sphere_scene(subdivisions: u32, centre: Vec3, r: f32) -> Scene {
+    let mut b = SceneBuilder::default();
+    let m = b.mesh("sphere", icosphere(subdivisions));
+    b.object(m, Mat4::from_scale_rotation_translation(Vec3::splat(r), glam::Quat::IDENTITY, centre));
+    b.build()
+}
+
+/// The analytic DoV of a sphere of radius r at distance d: (1 − √(1 − (r/d)²)) / 2.
+pub fn sphere_dov(r: f64, d: f64) -> f64 {
+    (1.0 - (1.0 - (r / d).powi(2)).sqrt()) / 2.0
+}
+
+/// A deterministic pseudo-random generator (SplitMix64) for scene layouts.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_f32(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next_f32()
+    }
+}
+
+/// Boxes scattered around the origin in every direction (none near the origin), sizes and
+/// distances varied so that they overlap in view: occlusion between objects is exercised. With
+/// `rotated`, each box gets a random orientation, so that no edge runs parallel to a texel row.
+pub fn box_field(count: usize, seed: u64, rotated: bool) -> Scene {
+    let mut rng = Rng(seed);
+    let mut b = SceneBuilder::default();
+    let cube = b.mesh("cube", unit_cube());
+    while b.scene.objects.len() < count {
+        let c = Vec3::new(rng.range(-20.0, 20.0), rng.range(-20.0, 20.0), rng.range(-20.0, 20.0));
+        let size = Vec3::new(rng.range(0.6, 6.0), rng.range(0.6, 6.0), rng.range(0.6, 6.0));
+        let axis = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        let angle = rng.range(0.0, std::f32::consts::TAU);
+        // Keep the origin (the viewpoint) well outside every box, whatever its orientation.
+        if c.length() < size.length() * 0.5 + 1.0 || axis.length() < 0.1 {
+            continue;
+        }
+        let rotation =
+            if rotated { glam::Quat::from_axis_angle(axis.normalize(), angle) } else { glam::Quat::IDENTITY };
+        b.object(cube, Mat4::from_scale_rotation_translation(size, rotation, c));
+    }
+    b.build()
+}
+
+/// Whether GPU tests should run here (prints `skipped: no adapter` otherwise).
+pub fn gpu_or_skip() -> bool {
+    hdov::dov::gpu::adapter_or_skip()
+}

@@ -1,0 +1,226 @@
+//! From-region DoV over a view grid: shared corners, max of sums, NVO, zero-DoV floor, shards.
+
+mod dov_common;
+
+use dov_common::*;
+use glam::Vec3;
+use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, audit_zero_dov, cell_dov, precompute_shard};
+use hdov::dov::{CpuBackend, CubeMap, DovBackend, IdCube, PointDov};
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
+
+/// Wraps a backend and records every point it is asked to measure.
+struct Counting<B> {
+    inner: B,
+    points: Vec<Vec3>,
+}
+
+impl<B: DovBackend> DovBackend for Counting<B> {
+    fn name(&self) -> String {
+        self.inner.name()
+    }
+    fn resolution(&self) -> u32 {
+        self.inner.resolution()
+    }
+    fn cube_map(&self) -> &CubeMap {
+        self.inner.cube_map()
+    }
+    fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> hdov::Result<()> {
+        self.points.push(p);
+        self.inner.render_ids(p, out)
+    }
+}
+
+/// A street of boxes along x; one leaf per two objects, all leaves under one root.
+fn street() -> (hdov::scene::Scene, TreeShape) {
+    let mut b = SceneBuilder::default();
+    for i in 0..8 {
+        let x = i as f32 * 3.0;
+        b.aabox(Vec3::new(x, 0.0, 4.0), Vec3::new(x + 2.0, 3.0, 6.0));
+        b.aabox(Vec3::new(x, 0.0, -6.0), Vec3::new(x + 2.0, 2.0, -4.0));
+    }
+    let scene = b.build();
+    let n = scene.objects.len() as u32;
+    // Node 0 is the root, nodes 1..=n/2 the leaves.
+    let object_leaf = (0..n).map(|o| 1 + o / 2).collect();
+    let mut node_parent = vec![None];
+    node_parent.extend((0..n / 2).map(|_| Some(0)));
+    (scene, TreeShape { object_leaf, node_parent })
+}
+
+fn street_grid() -> ViewGrid {
+    ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.0, -2.0), Vec3::new(20.0, 2.0, 2.0)), [4, 1, 2])
+}
+
+#[test]
+fn shared_corners_are_measured_once() {
+    let (scene, shape) = street();
+    let grid = street_grid();
+    let mut backend = Counting { inner: CpuBackend::new(&scene, 16).unwrap(), points: Vec::new() };
+    let mut calls = Vec::new();
+    let bounds = scene.all_object_bounds();
+    let out = precompute_shard(
+        &mut backend,
+        &grid,
+        &bounds,
+        &shape,
+        &PrecomputeOptions::default(),
+        Shard::ALL,
+        &mut |done, total| calls.push((done, total)),
+    )
+    .unwrap();
+    assert_eq!(grid.corner_count(), 5 * 2 * 3);
+    assert_eq!(backend.points.len(), grid.corner_count(), "each corner measured exactly once");
+    let mut distinct = backend.points.clone();
+    distinct.sort_by(|a, b| a.to_array().partial_cmp(&b.to_array()).unwrap());
+    distinct.dedup();
+    assert_eq!(distinct.len(), backend.points.len());
+    assert_eq!(out.points_measured, grid.corner_count());
+    assert_eq!(calls.last(), Some(&(30, 30)));
+    assert_eq!(out.cells.len(), grid.cell_count());
+
+    // With K interior points: K more per cell, corners still once.
+    backend.points.clear();
+    let options = PrecomputeOptions { interior_samples: 3, ..Default::default() };
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    assert_eq!(backend.points.len(), 30 + 3 * 8);
+    assert_eq!(out.points_measured, 30 + 3 * 8);
+}
+
+#[test]
+fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
+    let (scene, shape) = street();
+    let grid = street_grid();
+    let bounds = scene.all_object_bounds();
+    let options = PrecomputeOptions::default();
+    let mut backend = CpuBackend::new(&scene, 16).unwrap();
+    let whole = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let mut merged: Vec<(u32, CellDov)> = Vec::new();
+    let mut measured = 0;
+    for i in 0..3 {
+        let shard = Shard::parse(&format!("{i}/3")).unwrap();
+        let part = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, shard, &mut |_, _| {}).unwrap();
+        measured += part.points_measured;
+        merged.extend(part.cells);
+    }
+    merged.sort_by_key(|c| c.0);
+    assert_eq!(merged, whole.cells, "merged shards differ from the whole");
+    // Shards recompute the corners on their borders, never more than every cell's 8.
+    assert!(measured > whole.points_measured && measured < 8 * grid.cell_count());
+    assert!(Shard::parse("3/3").is_err() && Shard::parse("1-3").is_err() && Shard::parse("0/0").is_err());
+}
+
+#[test]
+fn node_dov_is_max_of_sums_not_sum_of_maxima() {
+    // Two objects under leaf 1, under root 0. Point A sees object 0 a lot and object 1 a little;
+    // point B the reverse. Max of sums = 0.35; sum of maxima would be 0.6.
+    let shape = TreeShape { object_leaf: vec![1, 1, 2], node_parent: vec![None, Some(0), Some(0)] };
+    let point = |objects: Vec<(u32, f64)>| PointDov { resolution: 64, objects, back_face: 0.0, empty: 0.0 };
+    let points = [point(vec![(0, 0.30), (1, 0.05)]), point(vec![(0, 0.05), (1, 0.30), (2, 0.01)])];
+    let bounds = vec![Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)); 3];
+    let cell = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    let c = cell_dov(&points, &cell, &bounds, &shape, &PrecomputeOptions::default(), &CubeMap::new(64));
+    assert_eq!(c.object(0), 0.30);
+    assert_eq!(c.object(1), 0.30);
+    let (leaf, leaf_nvo) = c.node(1);
+    assert!((leaf - 0.35).abs() < 1e-6, "leaf DoV {leaf} is not the max of sums 0.35");
+    assert_eq!(leaf_nvo, 2);
+    let (root, root_nvo) = c.node(0);
+    assert!((root - 0.36).abs() < 1e-6, "root DoV {root}");
+    assert_eq!(root_nvo, 3);
+    assert_eq!(c.node(2), (0.01, 1));
+    assert_eq!(c.floored, 0);
+}
+
+#[test]
+fn cell_dovs_from_a_real_scene_are_consistent() {
+    let (scene, shape) = street();
+    let grid = street_grid();
+    let bounds = scene.all_object_bounds();
+    let mut backend = CpuBackend::new(&scene, 32).unwrap();
+    let out = precompute_shard(
+        &mut backend,
+        &grid,
+        &bounds,
+        &shape,
+        &PrecomputeOptions::default(),
+        Shard::ALL,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    for (id, cell) in &out.cells {
+        let (root, nvo) = cell.node(0);
+        assert!(root > 0.0 && root <= 1.0, "cell {id}: root DoV {root}");
+        assert_eq!(nvo as usize, cell.objects.len(), "cell {id}: root NVO counts every visible object");
+        let sum_of_maxima: f32 = cell.objects.iter().map(|o| o.1).sum();
+        assert!(root <= sum_of_maxima + 1e-6);
+        for &(object, dov) in &cell.objects {
+            assert!(dov > 0.0);
+            for node in shape.ancestors(object) {
+                assert!(cell.node(node).0 >= dov, "cell {id}: node {node} below its object {object}");
+            }
+        }
+    }
+}
+
+/// A small box inside a square tube along x: no corner of the cell around it sees it (the tube's
+/// walls are in the way), a point on the tube's axis does. The floor test catches it.
+#[test]
+fn visible_zero_dov_object_gets_the_one_texel_floor() {
+    let mut b = SceneBuilder::default();
+    let target = b.aabox(Vec3::new(2.0, -0.1, -0.1), Vec3::new(2.2, 0.1, 0.1));
+    // Tube walls (|y|, |z| ≤ 0.5 inside), x from -3 to 3.
+    b.aabox(Vec3::new(-3.0, 0.5, -0.6), Vec3::new(3.0, 0.6, 0.6));
+    b.aabox(Vec3::new(-3.0, -0.6, -0.6), Vec3::new(3.0, -0.5, 0.6));
+    b.aabox(Vec3::new(-3.0, -0.5, 0.5), Vec3::new(3.0, 0.5, 0.6));
+    b.aabox(Vec3::new(-3.0, -0.5, -0.6), Vec3::new(3.0, 0.5, -0.5));
+    let scene = b.build();
+    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)] };
+    // One cell straddling the tube: corners outside it, the centre on its axis.
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, 1.0, 1.0)), [1, 1, 1]);
+    let bounds = scene.all_object_bounds();
+    let mut backend = CpuBackend::new(&scene, 64).unwrap();
+    assert!(backend.measure(Vec3::ZERO).unwrap().get(target) > 0.0, "the axis point sees the target");
+
+    let no_floor = PrecomputeOptions { zero_dov_margin: None, ..Default::default() };
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &no_floor, Shard::ALL, &mut |_, _| {}).unwrap();
+    assert_eq!(out.cells[0].1.object(target), 0.0, "a corner sees the target: the test scene is wrong");
+
+    // The target's box is 1 unit from the cell: a margin of 1.5 reaches it.
+    let floor = PrecomputeOptions { zero_dov_margin: Some(1.5), ..Default::default() };
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &floor, Shard::ALL, &mut |_, _| {}).unwrap();
+    let cell = &out.cells[0].1;
+    let want = backend.cube_map().texel_floor() as f32;
+    assert_eq!(cell.object(target), want);
+    assert_eq!(cell.floored, 1);
+    assert_eq!(cell.node(1).1, 5, "the floored object counts in NVO");
+
+    // The audit finds it with dense interior points (the cell centre is among them) and counts it
+    // as caught by the floor.
+    let audit = audit_zero_dov(&mut backend, &grid, &bounds, 0..1, 64, 1.5).unwrap();
+    assert_eq!(audit.cells, 1);
+    assert_eq!(audit.zero_dov, 1, "{audit:?}");
+    assert_eq!(audit.caught, 1, "{audit:?}");
+}
+
+#[test]
+fn points_inside_geometry_are_skipped() {
+    // A closed box around one corner of a 1-cell grid: that corner sees only back faces.
+    let mut b = SceneBuilder::default();
+    b.aabox(Vec3::splat(-0.5), Vec3::splat(0.5));
+    b.aabox(Vec3::new(5.0, 0.0, 0.0), Vec3::new(6.0, 1.0, 1.0));
+    let scene = b.build();
+    let shape = TreeShape { object_leaf: vec![0, 0], node_parent: vec![None] };
+    let grid = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::splat(2.0)), [1, 1, 1]);
+    let bounds = scene.all_object_bounds();
+    let mut backend = CpuBackend::new(&scene, 32).unwrap();
+    let options = PrecomputeOptions { zero_dov_margin: None, ..Default::default() };
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let cell = &out.cells[0].1;
+    assert_eq!(cell.skipped_points, 1);
+    // From the other corners the small box covers far less than the near-1 it covers from inside.
+    assert!(cell.object(0) < 0.3, "box DoV {} comes from the inside corner", cell.object(0));
+    let keep = PrecomputeOptions { skip_inside_points: false, ..options };
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &keep, Shard::ALL, &mut |_, _| {}).unwrap();
+    assert!(out.cells[0].1.object(0) > 0.9);
+}
