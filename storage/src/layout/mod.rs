@@ -6,7 +6,7 @@
 //! | vertical | `vindex.vertical`, `vpages.vertical` | the cell's segment of N_node pointers | pointer from the segment |
 //! | indexed-vertical | `vindex.indexed-vertical`, `vpages.indexed-vertical` | the cell's (node, pointer) pairs of visible nodes | binary search in the segment |
 //!
-//! Every file is a [`PageFile`](crate::PageFile); records are packed into pages so that a
+//! Every file is a [`PageFile`]; records are packed into pages so that a
 //! record no larger than a page never straddles two (`docs/storage-format.md` §4). The first file of each layout starts with a metadata record (cell and node
 //! counts, V-entry codec, fan-outs, summary counts; for indexed-vertical also the per-cell
 //! directory), read once at open. `docs/storage-format.md` gives every byte.
