@@ -8,13 +8,15 @@ use serde_json::json;
 use super::args::{parse_dims, parse_region};
 use crate::city::{CityParams, CityScale};
 use crate::db::build::BuildReport;
-use crate::db::{self, BuildParams, Database};
+use crate::db::{self, BuildParams, Database, VisibilityParams};
+use crate::dov::select::BackendChoice;
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 use crate::progress::Progress;
 use crate::rtree::TreeAlgorithm;
 use crate::scene::Scene;
+use hdov_storage::{DovCodec, LayoutKind};
 
 #[derive(Args)]
 pub struct DemoArgs {
@@ -71,9 +73,87 @@ pub struct BuildArgs {
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
     #[arg(long, default_value = "str")]
     tree: TreeAlgorithm,
+    #[command(flatten)]
+    visibility: VisibilityArgs,
     /// Replace an existing database at --out.
     #[arg(long)]
     force: bool,
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+pub struct VisibilityArgs {
+    /// Texels per cube-face edge for the DoV measurement.
+    #[arg(long, default_value_t = 128)]
+    resolution: u32,
+    /// Sample points per cell: `corners` (the 8 shared corners) or a number K of stratified
+    /// interior points in addition to the corners.
+    #[arg(long, default_value = "corners", value_parser = parse_samples)]
+    samples: u32,
+    /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
+    /// Compute only part I of N of the cells (join the parts with `hdov merge`).
+    #[arg(long, value_parser = parse_shard)]
+    shard: Option<[u32; 2]>,
+    /// V-page layouts to write, comma-separated.
+    #[arg(long, default_value = "horizontal,vertical,indexed-vertical", value_delimiter = ',')]
+    layouts: Vec<LayoutKind>,
+    /// How V-entries store DoV: f32, or log-u16 (smaller; error bound in docs/storage-format.md).
+    #[arg(long, default_value = "f32")]
+    dov_codec: DovCodec,
+    /// Build the tree and LODs only, without visibility.
+    #[arg(long)]
+    no_visibility: bool,
+}
+
+impl VisibilityArgs {
+    fn params(&self) -> Option<VisibilityParams> {
+        (!self.no_visibility).then(|| VisibilityParams {
+            resolution: self.resolution,
+            backend: self.backend,
+            interior_samples: self.samples,
+            layouts: self.layouts.iter().map(|k| k.name().to_string()).collect(),
+            dov_codec: self.dov_codec.to_string(),
+            shard: self.shard,
+        })
+    }
+}
+
+fn parse_samples(s: &str) -> std::result::Result<u32, String> {
+    if s == "corners" {
+        return Ok(0);
+    }
+    s.parse().map_err(|_| format!("'{s}' is neither 'corners' nor a number of interior points"))
+}
+
+fn parse_shard(s: &str) -> std::result::Result<[u32; 2], String> {
+    let sh = crate::dov::precompute::Shard::parse(s).map_err(|e| e.to_string())?;
+    Ok([sh.index, sh.count])
+}
+
+#[derive(Args)]
+pub struct MergeArgs {
+    /// The shard databases, all N of them.
+    #[arg(required = true)]
+    shards: Vec<PathBuf>,
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+pub struct DovArgs {
+    scene: PathBuf,
+    /// The viewpoint X,Y,Z.
+    #[arg(long, value_parser = super::args::parse_vec3)]
+    at: glam::Vec3,
+    #[arg(long, default_value_t = 256)]
+    resolution: u32,
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
     #[arg(long)]
     json: bool,
 }
@@ -132,7 +212,8 @@ pub fn build(a: BuildArgs) -> Result<()> {
     let grid = ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)
         .map_err(|r| Error::bad_arg("--grid", r))?;
     scene.grid = Some(grid);
-    let params = BuildParams { page_size: a.page_size, tree: a.tree, ..Default::default() };
+    let params =
+        BuildParams { page_size: a.page_size, tree: a.tree, visibility: a.visibility.params(), ..Default::default() };
     let report = db::build::build(&scene, &a.out, &params, a.force, &Progress::for_terminal(a.json))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).expect("serialisable"));
@@ -160,13 +241,52 @@ fn print_build(out: &Path, r: &BuildReport) {
         t.fill_factor * 100.0
     );
     println!("  LOD triangles {} (leaf + internal)", c.lod_triangles);
+    print_visibility(&r.manifest);
     println!("  time: tree {:.2} s, LODs {:.2} s, write {:.2} s", r.tree_seconds, r.lod_seconds, r.write_seconds);
+}
+
+fn print_visibility(m: &db::Manifest) {
+    let (Some(v), Some(g), Some(p)) = (&m.visibility, m.grid, m.build.visibility.as_ref()) else {
+        println!("  visibility: none");
+        return;
+    };
+    println!(
+        "  visibility: {} of {} cells ({}x{}x{}), {} sample points at R = {}, {:.1} s, backend {}",
+        v.cells_computed,
+        g.cell_count(),
+        g.dims[0],
+        g.dims[1],
+        g.dims[2],
+        v.sample_points,
+        p.resolution,
+        v.seconds,
+        v.backend
+    );
+    for l in &v.layouts {
+        println!("    {:<17} V-pages {:>12} bytes, index {:>10} bytes", l.name, l.vpage_bytes, l.index_bytes);
+    }
 }
 
 pub fn info(a: InfoArgs) -> Result<()> {
     let db = Database::open(&a.db)?;
     let m = &db.manifest;
     let c = &m.counts;
+    let mut layouts = serde_json::Map::new();
+    for kind in db.layouts() {
+        let s = db.layout(kind, hdov_storage::ReadMode::Mmap)?.summary();
+        let sizes = m.visibility.iter().flat_map(|v| &v.layouts).find(|l| l.name == kind.name());
+        layouts.insert(
+            kind.name().into(),
+            json!({
+                "bytes": s.bytes,
+                "vpage_bytes": sizes.map(|l| l.vpage_bytes),
+                "index_bytes": sizes.map(|l| l.index_bytes),
+                "dov_codec": s.dov.to_string(),
+                "visible_nodes_per_cell": {"mean": s.visible_nodes_mean, "max": s.visible_nodes_max},
+                "flip_pages": {"mean": s.flip_pages_mean, "max": s.flip_pages_max},
+            }),
+        );
+    }
     if a.json {
         let doc = json!({
             "objects": c.objects,
@@ -177,8 +297,9 @@ pub fn info(a: InfoArgs) -> Result<()> {
             "cells": c.cells,
             "lod_triangles": c.lod_triangles,
             "grid": m.grid.map(|g| json!({"region": g.region.to_array(), "dims": g.dims})),
-            "resolution": null,
-            "layouts": {},
+            "resolution": m.build.visibility.as_ref().map(|v| v.resolution),
+            "visibility": m.visibility,
+            "layouts": layouts,
             "tree": m.tree,
             "build": m.build,
             "files": m.files,
@@ -215,6 +336,16 @@ pub fn info(a: InfoArgs) -> Result<()> {
     for f in &m.files {
         println!("  {:<16} {:>12} bytes", f.name, f.bytes);
     }
+    print_visibility(m);
+    for (name, l) in &layouts {
+        println!(
+            "    {name:<17} visible nodes per cell {:.1} (max {}), cell flip reads {:.1} pages (max {})",
+            l["visible_nodes_per_cell"]["mean"].as_f64().unwrap_or(0.0),
+            l["visible_nodes_per_cell"]["max"],
+            l["flip_pages"]["mean"].as_f64().unwrap_or(0.0),
+            l["flip_pages"]["max"]
+        );
+    }
     Ok(())
 }
 
@@ -236,6 +367,54 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         println!("scene: {}", scene_path.display());
         print_build(&db_path, &report);
         println!("demo finished in {:.1} s", t.elapsed().as_secs_f64());
+    }
+    Ok(())
+}
+
+pub fn merge(a: MergeArgs) -> Result<()> {
+    let m = db::merge::merge(&a.shards, &a.out, a.force)?;
+    let v = m.visibility.as_ref().expect("a merged database has visibility");
+    println!(
+        "{}: merged {} shards, {} cells, {} sample points",
+        a.out.display(),
+        a.shards.len(),
+        v.cells_computed,
+        v.sample_points
+    );
+    Ok(())
+}
+
+pub fn dov(a: DovArgs) -> Result<()> {
+    let (scene, warnings) = Scene::load(&a.scene)?;
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    let mut backend = crate::dov::select::create_backend(a.backend, &scene, a.resolution)?;
+    let point = backend.measure(a.at)?;
+    let mut objects: Vec<_> = point.objects.iter().map(|&(id, d)| (id, d)).collect();
+    objects.sort_by(|x, y| y.1.total_cmp(&x.1));
+    if a.json {
+        let doc = json!({
+            "at": a.at.to_array(),
+            "resolution": a.resolution,
+            "backend": if backend.name().starts_with("gpu") { "gpu" } else { "cpu" },
+            "adapter": backend.name(),
+            "sky": point.empty,
+            "back_face": point.back_face,
+            "objects": objects.iter().map(|&(id, d)| json!({"name": scene.objects[id as usize].name, "id": id, "dov": d})).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
+        return Ok(());
+    }
+    println!("DoV at {:?}, R = {}, {}", a.at.to_array(), a.resolution, backend.name());
+    println!(
+        "  {} objects visible, covering {:.4} of the sphere; sky {:.4}",
+        objects.len(),
+        point.total(),
+        point.empty
+    );
+    for &(id, d) in &objects {
+        println!("  {:>10.6}  {} (#{id})", d, scene.objects[id as usize].name);
     }
     Ok(())
 }

@@ -27,8 +27,12 @@ enum Command {
     Generate(commands::GenerateCommand),
     /// Build a database from a scene (an OBJ file or a scene manifest .json).
     Build(commands::BuildArgs),
+    /// Join shard databases (built with --shard I/N) into one.
+    Merge(commands::MergeArgs),
     /// Describe a database: counts, build parameters, file sizes.
     Info(commands::InfoArgs),
+    /// Point DoV of every object of a scene seen from one point.
+    Dov(commands::DovArgs),
 }
 
 pub fn main() -> ExitCode {
@@ -37,7 +41,9 @@ pub fn main() -> ExitCode {
         Command::Demo(a) => commands::demo(a),
         Command::Generate(g) => commands::generate(g),
         Command::Build(a) => commands::build(a),
+        Command::Merge(a) => commands::merge(a),
         Command::Info(a) => commands::info(a),
+        Command::Dov(a) => commands::dov(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

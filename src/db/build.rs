@@ -9,10 +9,14 @@ use hdov_storage::{BlobWriter, DirTxn, PageFileWriter};
 use super::catalog::{Catalog, LodRef, ObjectRecord};
 use super::tree_page::{self, NodePage};
 use super::*;
+use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
+use crate::dov::select::create_backend;
+use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
+use hdov_storage::{LayoutOptions, VData, write_layout};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]
@@ -92,6 +96,11 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     cat.append(&bytes)?;
     cat.finish()?;
 
+    let visibility = match (&params.visibility, scene.grid) {
+        (Some(v), Some(grid)) => Some(build_visibility(scene, &tree, &grid, v, params.page_size, &dir, progress)?),
+        _ => None,
+    };
+
     let lod_triangles = catalog.mesh_lods.iter().chain(&catalog.node_lods).flatten().map(|l| l.faces as u64).sum();
     let mut manifest = Manifest {
         hdov: Manifest::MAGIC.into(),
@@ -110,6 +119,7 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
         tree: tree.stats(),
         grid: scene.grid,
         files: Vec::new(),
+        visibility,
     };
     for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
         let bytes = std::fs::metadata(dir.join(name)).map_err(|e| Error::io(dir.join(name), e))?.len();
@@ -119,4 +129,71 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     hdov_storage::write_file_synced(&dir.join(MANIFEST_FILE), &json)?;
     txn.commit()?;
     Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64() })
+}
+
+/// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.
+fn build_visibility(
+    scene: &Scene,
+    tree: &RTree,
+    grid: &ViewGrid,
+    v: &VisibilityParams,
+    page_size: u32,
+    dir: &Path,
+    progress: &Progress,
+) -> Result<VisibilityInfo> {
+    let kinds = v.layout_kinds()?;
+    let codec = v.codec()?;
+    let t = Instant::now();
+    let mut backend = create_backend(v.backend, scene, v.resolution)?;
+    let shape =
+        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+    let options = PrecomputeOptions { interior_samples: v.interior_samples, ..Default::default() };
+    let bar = progress.bar("sample points", 0);
+    let dov = precompute_shard(
+        backend.as_mut(),
+        grid,
+        &scene.all_object_bounds(),
+        &shape,
+        &options,
+        v.shard(),
+        &mut |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+    )?;
+    bar.finish_and_clear();
+    let data = visibility::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);
+    let layouts = write_layouts(dir, &kinds, &data, page_size, codec)?;
+    Ok(VisibilityInfo {
+        backend: backend.name(),
+        cells_computed: dov.cells.len() as u64,
+        sample_points: dov.points_measured as u64,
+        floored_objects: dov.cells.iter().map(|(_, c)| c.floored as u64).sum(),
+        skipped_points: dov.cells.iter().map(|(_, c)| c.skipped_points as u64).sum(),
+        seconds: t.elapsed().as_secs_f64(),
+        layouts,
+    })
+}
+
+/// Writes every chosen layout of `data` into `dir`.
+pub(crate) fn write_layouts(
+    dir: &Path,
+    kinds: &[hdov_storage::LayoutKind],
+    data: &VData,
+    page_size: u32,
+    codec: hdov_storage::DovCodec,
+) -> Result<Vec<LayoutInfo>> {
+    let opts = LayoutOptions { page_size: page_size.min(hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE), dov: codec };
+    kinds
+        .iter()
+        .map(|&kind| {
+            let size = write_layout(dir, kind, data, &opts)?;
+            Ok(LayoutInfo {
+                name: kind.name().to_string(),
+                vpage_bytes: size.vpage_bytes,
+                index_bytes: size.index_bytes,
+                files: size.files.into_iter().map(|(name, bytes)| FileEntry { name, bytes }).collect(),
+            })
+        })
+        .collect()
 }

@@ -11,19 +11,23 @@
 
 pub mod build;
 pub mod catalog;
+pub mod merge;
 pub mod tree_page;
+pub mod visibility;
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::dov::precompute::Shard;
+use crate::dov::select::BackendChoice;
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::LodParams;
 use crate::rtree::{TreeAlgorithm, TreeStats};
 use crate::scene::Mesh;
 use catalog::{Catalog, LodRef};
-use hdov_storage::{BlobFile, PageFile, ReadMode};
+use hdov_storage::{BlobFile, DovCodec, LayoutKind, LayoutReader, PageFile, ReadMode};
 use tree_page::NodePage;
 
 pub const FORMAT_VERSION: u32 = 1;
@@ -38,15 +42,90 @@ pub const CATALOG_KIND: [u8; 4] = *b"CATL";
 /// How a database was built.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BuildParams {
+    /// Bytes per page of the tree file and of the V-page layouts.
     pub page_size: u32,
     pub tree: TreeAlgorithm,
     pub lod: LodParams,
+    /// `None` builds tree and LODs only.
+    pub visibility: Option<VisibilityParams>,
 }
 
 impl Default for BuildParams {
     fn default() -> Self {
-        Self { page_size: 4096, tree: TreeAlgorithm::Str, lod: LodParams::default() }
+        Self {
+            page_size: 4096,
+            tree: TreeAlgorithm::Str,
+            lod: LodParams::default(),
+            visibility: Some(VisibilityParams::default()),
+        }
     }
+}
+
+/// How DoV is measured and stored.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VisibilityParams {
+    /// Texels per cube-face edge (R).
+    pub resolution: u32,
+    pub backend: BackendChoice,
+    /// Stratified interior sample points per cell, besides the 8 shared corners.
+    pub interior_samples: u32,
+    /// Layouts to write: `horizontal`, `vertical`, `indexed-vertical`.
+    pub layouts: Vec<String>,
+    /// How V-entries store DoV: `f32` or `log-u16`.
+    pub dov_codec: String,
+    /// `[I, N]`: this database holds part I of N of the grid's cells.
+    pub shard: Option<[u32; 2]>,
+}
+
+impl Default for VisibilityParams {
+    fn default() -> Self {
+        Self {
+            resolution: 128,
+            backend: BackendChoice::Auto,
+            interior_samples: 0,
+            layouts: LayoutKind::ALL.iter().map(|k| k.name().to_string()).collect(),
+            dov_codec: DovCodec::F32.to_string(),
+            shard: None,
+        }
+    }
+}
+
+impl VisibilityParams {
+    pub fn layout_kinds(&self) -> Result<Vec<LayoutKind>> {
+        self.layouts.iter().map(|l| l.parse().map_err(|e: String| Error::bad_arg("--layouts", e))).collect()
+    }
+
+    pub fn codec(&self) -> Result<DovCodec> {
+        self.dov_codec.parse().map_err(|e: String| Error::bad_arg("--dov-codec", e))
+    }
+
+    pub fn shard(&self) -> Shard {
+        self.shard.map_or(Shard::ALL, |[index, count]| Shard { index, count })
+    }
+}
+
+/// What the visibility stage measured and wrote.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VisibilityInfo {
+    /// The backend that measured, with its adapter.
+    pub backend: String,
+    /// Cells of the grid this database holds visibility for.
+    pub cells_computed: u64,
+    pub sample_points: u64,
+    /// Objects given the one-texel floor (visible from the cell, seen from no sample point).
+    pub floored_objects: u64,
+    /// Sample points left out because they lie inside geometry.
+    pub skipped_points: u64,
+    pub seconds: f64,
+    pub layouts: Vec<LayoutInfo>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayoutInfo {
+    pub name: String,
+    pub vpage_bytes: u64,
+    pub index_bytes: u64,
+    pub files: Vec<FileEntry>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -80,6 +159,7 @@ pub struct Manifest {
     pub tree: TreeStats,
     pub grid: Option<ViewGrid>,
     pub files: Vec<FileEntry>,
+    pub visibility: Option<VisibilityInfo>,
 }
 
 impl Manifest {
@@ -176,6 +256,27 @@ impl Database {
 
     pub fn reset_io(&self) {
         self.tree.reset_reads();
+    }
+
+    /// The layouts this database holds, in the order they were written.
+    pub fn layouts(&self) -> Vec<LayoutKind> {
+        let names = self.manifest.visibility.iter().flat_map(|v| &v.layouts);
+        names.filter_map(|l| l.name.parse().ok()).collect()
+    }
+
+    /// Opens the V-page reader of one layout.
+    pub fn layout(&self, kind: LayoutKind, mode: ReadMode) -> Result<LayoutReader> {
+        if !self.layouts().contains(&kind) {
+            return Err(Error::bad_arg("--layout", format!("{} holds no {kind} layout", self.dir.display())));
+        }
+        let reader = LayoutReader::open(&self.dir, kind, mode)?;
+        if reader.node_count() != self.node_count() {
+            return Err(Error::bad_file(
+                &self.dir,
+                format!("{kind} layout has {} nodes, the tree {}", reader.node_count(), self.node_count()),
+            ));
+        }
+        Ok(reader)
     }
 
     /// Loads one LOD mesh from `geometry.blob` (checksum verified).

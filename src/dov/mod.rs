@@ -11,6 +11,7 @@ pub mod cpu;
 pub mod cubemap;
 pub mod gpu;
 pub mod precompute;
+pub mod select;
 
 use std::collections::HashMap;
 

@@ -12,14 +12,7 @@ use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
 use hdov_storage::{LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, write_layout};
 
 fn spec(fanout: u16, levels: u32, cells: u32) -> SyntheticSpec {
-    SyntheticSpec {
-        cells,
-        fanout,
-        levels,
-        reach: 0.02,
-        visible_share: 0.3,
-        seed: 3,
-    }
+    SyntheticSpec { cells, fanout, levels, reach: 0.02, visible_share: 0.3, seed: 3 }
 }
 
 fn write_all(dir: &Path, data: &VData) {
@@ -78,18 +71,10 @@ fn bench_layouts(c: &mut Criterion) {
     let data = synthetic_vdata(&spec(16, 4, 32));
     let dir = tempfile::tempdir().expect("tempdir");
     write_all(dir.path(), &data);
-    let visible: Vec<Vec<u32>> = data
-        .cells
-        .iter()
-        .map(|c| c.iter().map(|(n, _)| *n).collect())
-        .collect();
+    let visible: Vec<Vec<u32>> = data.cells.iter().map(|c| c.iter().map(|(n, _)| *n).collect()).collect();
     let cells = data.cell_count;
     for mode in [ReadMode::Mmap, ReadMode::Pread] {
-        let m = if mode == ReadMode::Mmap {
-            "mmap"
-        } else {
-            "pread"
-        };
+        let m = if mode == ReadMode::Mmap { "mmap" } else { "pread" };
         let mut flip = c.benchmark_group(format!("flip/{m}"));
         for kind in LayoutKind::ALL {
             let mut r = LayoutReader::open(dir.path(), kind, mode).expect("open");

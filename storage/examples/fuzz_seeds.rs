@@ -10,11 +10,7 @@ use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
 use hdov_storage::{BlobWriter, DovCodec, LayoutKind, LayoutOptions, PageFileWriter, write_layout};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let out = PathBuf::from(
-        std::env::args()
-            .nth(1)
-            .ok_or("usage: fuzz_seeds CORPUS_DIR")?,
-    );
+    let out = PathBuf::from(std::env::args().nth(1).ok_or("usage: fuzz_seeds CORPUS_DIR")?);
     let tmp = tempfile::tempdir()?;
     for t in ["pagefile", "blob", "layout"] {
         fs::create_dir_all(out.join(t))?;
@@ -35,23 +31,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     w.finish()?;
     fs::copy(&b, out.join("blob/three-records"))?;
 
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 3,
-        fanout: 4,
-        levels: 2,
-        reach: 0.5,
-        ..Default::default()
-    });
+    let data = synthetic_vdata(&SyntheticSpec { cells: 3, fanout: 4, levels: 2, reach: 0.5, ..Default::default() });
     for (i, kind) in LayoutKind::ALL.into_iter().enumerate() {
         for dov in [DovCodec::F32, DovCodec::LogU16] {
             let dir = tmp.path().join(format!("{kind}-{dov}"));
             fs::create_dir(&dir)?;
             write_layout(&dir, kind, &data, &LayoutOptions { page_size: 64, dov })?;
-            let files: Vec<Vec<u8>> = kind
-                .file_names()
-                .iter()
-                .map(|f| fs::read(dir.join(f)))
-                .collect::<Result<_, _>>()?;
+            let files: Vec<Vec<u8>> =
+                kind.file_names().iter().map(|f| fs::read(dir.join(f))).collect::<Result<_, _>>()?;
             // The layout target's format: selector byte, u32 split, first file, second file.
             // Bit 7 set: the target recomputes checksums after mutation.
             let mut input = vec![i as u8 | 0x80];

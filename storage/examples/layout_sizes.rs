@@ -7,10 +7,7 @@ use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
 use hdov_storage::{DovCodec, LayoutKind, LayoutOptions, LayoutReader, ReadMode, write_layout};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<u32> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse())
-        .collect::<Result<_, _>>()?;
+    let args: Vec<u32> = std::env::args().skip(1).map(|a| a.parse()).collect::<Result<_, _>>()?;
     let spec = SyntheticSpec {
         cells: args.first().copied().unwrap_or(256),
         fanout: args.get(1).copied().unwrap_or(32) as u16,
@@ -39,15 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for dov in [DovCodec::F32, DovCodec::LogU16] {
             let dir = root.path().join(format!("{kind}-{dov}"));
             std::fs::create_dir(&dir)?;
-            let size = write_layout(
-                &dir,
-                kind,
-                &data,
-                &LayoutOptions {
-                    dov,
-                    ..Default::default()
-                },
-            )?;
+            let size = write_layout(&dir, kind, &data, &LayoutOptions { dov, ..Default::default() })?;
             let s = LayoutReader::open(&dir, kind, ReadMode::Mmap)?.summary();
             println!(
                 "| {kind} | {dov} | {} | {} | {} | {:.2} / {} |",

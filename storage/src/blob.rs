@@ -196,10 +196,7 @@ impl BlobFile {
             end = r.offset + (RECORD_HEADER_LEN as u64) + u64::from(r.len);
         }
         if end != self.file_len() {
-            return Err(Error::corrupt(
-                &self.path,
-                format!("records end at byte {end}, data at {}", self.file_len()),
-            ));
+            return Err(Error::corrupt(&self.path, format!("records end at byte {end}, data at {}", self.file_len())));
         }
         Ok(())
     }

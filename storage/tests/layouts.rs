@@ -71,31 +71,26 @@ fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
 
 fn arb_vdata() -> impl Strategy<Value = VData> {
     (1u32..6, prop::collection::vec(0u16..40, 1..12)).prop_flat_map(|(cells, fanout)| {
-        let nodes = fanout.len();
-        let entry = (prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6], prop_oneof![0u32..10, Just(70_000u32)]);
-        let page = |f: u16| prop::collection::vec(entry.clone(), f as usize);
-        let per_node: Vec<_> = fanout.iter().map(|&f| prop::option::weighted(0.5, page(f))).collect();
-        let cell = per_node;
-        (Just(cells), Just(fanout.clone()), prop::collection::vec(cell, cells as usize), Just(nodes)).prop_map(
-            |(cells, fanout, raw, _)| VData {
-                cell_count: cells,
-                node_fanout: fanout,
-                cells: raw
-                    .into_iter()
-                    .map(|c| {
-                        c.into_iter()
-                            .enumerate()
-                            .filter_map(|(n, p)| {
-                                p.map(|p| {
-                                    let e = p.into_iter().map(|(dov, nvo)| VEntry { dov, nvo });
-                                    (n as u32, e.collect())
-                                })
-                            })
-                            .collect()
-                    })
-                    .collect(),
-            },
-        )
+        // DoVs: hidden, ordinary, and below the log scale's floor; NVOs small or needing u32.
+        let entry = (prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6], prop_oneof![0u32..10, Just(70_000u32)])
+            .prop_map(|(dov, nvo)| VEntry { dov, nvo });
+        // Per node, visible with probability 1/2: its V-page, else nothing.
+        let cell: Vec<_> = fanout
+            .iter()
+            .map(|&f| prop::option::weighted(0.5, prop::collection::vec(entry.clone(), f as usize)))
+            .collect();
+        let cells_strategy = prop::collection::vec(cell, cells as usize);
+        (Just(fanout), cells_strategy).prop_map(move |(node_fanout, raw)| VData {
+            cell_count: cells,
+            node_fanout,
+            cells: raw
+                .into_iter()
+                .map(|c| {
+                    let visible = c.into_iter().enumerate();
+                    visible.filter_map(|(n, p)| p.map(|p| (n as u32, p))).collect()
+                })
+                .collect(),
+        })
     })
 }
 

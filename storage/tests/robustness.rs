@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 
 use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
 use hdov_storage::{
-    BlobFile, BlobWriter, DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, PageFile,
-    ReadMode, write_layout,
+    BlobFile, BlobWriter, DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, PageFile, ReadMode, write_layout,
 };
 
 /// xorshift64*: reproducible test randomness without a dependency.
@@ -84,13 +83,7 @@ fn mutate(rng: &mut Rng, good: &[u8]) -> Vec<u8> {
 }
 
 fn sample_layouts(dir: &Path, page_size: u32, dov: DovCodec) {
-    let data = synthetic_vdata(&SyntheticSpec {
-        cells: 5,
-        fanout: 6,
-        levels: 3,
-        reach: 0.3,
-        ..Default::default()
-    });
+    let data = synthetic_vdata(&SyntheticSpec { cells: 5, fanout: 6, levels: 3, reach: 0.3, ..Default::default() });
     for kind in LayoutKind::ALL {
         write_layout(dir, kind, &data, &LayoutOptions { page_size, dov }).unwrap();
     }
@@ -184,11 +177,7 @@ fn random_mutations_of_page_and_blob_files_never_panic() {
     for round in 0..200 {
         let mut b: Vec<u8> = (0..rng.below(400)).map(|_| rng.next() as u8).collect();
         if round % 2 == 0 && b.len() >= 8 {
-            b[..8].copy_from_slice(if round % 4 == 0 {
-                b"HDOVPAGE"
-            } else {
-                b"HDOVBLOB"
-            });
+            b[..8].copy_from_slice(if round % 4 == 0 { b"HDOVPAGE" } else { b"HDOVBLOB" });
         }
         fs::write(&probe, &b).unwrap();
         assert!(PageFile::open(&probe, *b"VTVP", ReadMode::Mmap).is_err());
@@ -212,20 +201,14 @@ fn damaged(good: &Path, name: &str, edit: impl Fn(&mut Vec<u8>)) -> tempfile::Te
 }
 
 fn kind_of(name: &str) -> LayoutKind {
-    LayoutKind::ALL
-        .into_iter()
-        .find(|k| k.file_names().contains(&name))
-        .unwrap()
+    LayoutKind::ALL.into_iter().find(|k| k.file_names().contains(&name)).unwrap()
 }
 
 #[test]
 fn targeted_damage_to_each_layout_file() {
     let good = tempfile::tempdir().unwrap();
     sample_layouts(good.path(), 64, DovCodec::F32);
-    let names: Vec<&str> = LayoutKind::ALL
-        .iter()
-        .flat_map(|k| k.file_names().iter().copied())
-        .collect();
+    let names: Vec<&str> = LayoutKind::ALL.iter().flat_map(|k| k.file_names().iter().copied()).collect();
     for name in names {
         let kind = kind_of(name);
         let len = fs::metadata(good.path().join(name)).unwrap().len() as usize;
@@ -255,10 +238,7 @@ fn targeted_damage_to_each_layout_file() {
             refresh_page_checksums(b);
         });
         let e = LayoutReader::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
-        assert!(
-            matches!(e, Error::WrongVersion { found: 9, .. }),
-            "{name}: {e}"
-        );
+        assert!(matches!(e, Error::WrongVersion { found: 9, .. }), "{name}: {e}");
     }
 }
 
@@ -269,11 +249,7 @@ fn mismatched_builds_and_bad_metadata_are_corrupt() {
     sample_layouts(a.path(), 64, DovCodec::F32);
     sample_layouts(b.path(), 4096, DovCodec::F32);
     // vpages.vertical of another build next to this build's index.
-    fs::copy(
-        b.path().join("vpages.vertical"),
-        a.path().join("vpages.vertical"),
-    )
-    .unwrap();
+    fs::copy(b.path().join("vpages.vertical"), a.path().join("vpages.vertical")).unwrap();
     let e = LayoutReader::open(a.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
 

@@ -43,7 +43,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
         fanout: data.node_fanout.clone(),
         directory: Vec::new(),
     };
-    let mut p = Packer::new(PageFileWriter::create(&path, TAG, w.page_size)?);
+    let mut p = Packer::new(&path, PageFileWriter::create(&path, TAG, w.page_size)?);
     p.put(&meta.encode())?;
     // Each cell's list is sorted by node: one cursor per cell walks it as nodes advance.
     let mut cursor = vec![0usize; cells];

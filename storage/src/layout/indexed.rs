@@ -32,7 +32,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let meta_len = Meta::encoded_len(LayoutKind::IndexedVertical, u64::from(data.cell_count), nodes as u64);
     let data_start = record_pages(meta_len, cap as u64);
     // Place the segments first (no writing) so the directory can go in the metadata.
-    let mut dry = Packer::dry_run(cap, data_start);
+    let mut dry = Packer::dry_run(&w.dir.join(INDEX_FILE), cap, data_start);
     let mut directory = Vec::with_capacity(addrs.len());
     let mut flip_total = 0u64;
     let mut flip_max = 0u64;
@@ -58,7 +58,8 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
         fanout: data.node_fanout.clone(),
         directory,
     };
-    let mut p = Packer::new(PageFileWriter::create(&w.dir.join(INDEX_FILE), INDEX_TAG, w.page_size)?);
+    let index_path = w.dir.join(INDEX_FILE);
+    let mut p = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
     p.put(&meta.encode())?;
     p.align()?;
     let mut bytes = Vec::new();

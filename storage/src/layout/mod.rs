@@ -6,8 +6,8 @@
 //! | vertical | `vindex.vertical`, `vpages.vertical` | the cell's segment of N_node pointers | pointer from the segment |
 //! | indexed-vertical | `vindex.indexed-vertical`, `vpages.indexed-vertical` | the cell's (node, pointer) pairs of visible nodes | binary search in the segment |
 //!
-//! Every file is a [`PageFile`](crate::PageFile); records are packed into pages by the rule of
-//! [`packing`]. The first file of each layout starts with a metadata record (cell and node
+//! Every file is a [`PageFile`]; records are packed into pages so that a
+//! record no larger than a page never straddles two (`docs/storage-format.md` §4). The first file of each layout starts with a metadata record (cell and node
 //! counts, V-entry codec, fan-outs, summary counts; for indexed-vertical also the per-cell
 //! directory), read once at open. `docs/storage-format.md` gives every byte.
 
@@ -479,9 +479,7 @@ impl LayoutReader {
     /// pointers (an fsck). Returns the number of visible V-pages. Leaves no cell selected and
     /// the page counts at zero. Its work is bounded by the files' size.
     pub fn verify(&mut self) -> Result<u64> {
-        let nodes: Vec<u32> = (0..self.meta.node_count)
-            .filter(|&n| self.meta.fanout[n as usize] > 0)
-            .collect();
+        let nodes: Vec<u32> = (0..self.meta.node_count).filter(|&n| self.meta.fanout[n as usize] > 0).collect();
         // Without nodes a vertical segment is empty, and a horizontal flip reads nothing: the
         // cell count is then unbounded by the file and there is nothing to read.
         let cells_matter = match self.meta.kind {

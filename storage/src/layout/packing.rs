@@ -5,7 +5,7 @@
 //! and fills consecutive pages. So reading any record costs the fewest pages possible:
 //! 1 for a small record, ⌈len / capacity⌉ for a large one, 0 for an empty one.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::le::{u16_at, u32_at};
@@ -75,6 +75,8 @@ impl SlotArray {
 
 /// Packs records into a page file (or, with no file, only computes where they would go).
 pub(crate) struct Packer {
+    /// The file written (or planned, for a dry run), for error messages.
+    path: PathBuf,
     writer: Option<PageFileWriter>,
     cap: usize,
     /// Payload of the page being filled.
@@ -84,14 +86,14 @@ pub(crate) struct Packer {
 }
 
 impl Packer {
-    pub fn new(writer: PageFileWriter) -> Self {
+    pub fn new(path: &Path, writer: PageFileWriter) -> Self {
         let cap = writer.capacity();
-        Self { writer: Some(writer), cap, cur: Vec::with_capacity(cap), cur_page: 0 }
+        Self { path: path.to_path_buf(), writer: Some(writer), cap, cur: Vec::with_capacity(cap), cur_page: 0 }
     }
 
     /// A packer that writes nothing: for computing addresses before writing.
-    pub fn dry_run(cap: usize, first_page: u64) -> Self {
-        Self { writer: None, cap, cur: Vec::new(), cur_page: first_page }
+    pub fn dry_run(path: &Path, cap: usize, first_page: u64) -> Self {
+        Self { path: path.to_path_buf(), writer: None, cap, cur: Vec::new(), cur_page: first_page }
     }
 
     fn emit(&mut self, payload: Option<&[u8]>) -> Result<()> {
@@ -114,7 +116,7 @@ impl Packer {
         let page = u32::try_from(self.cur_page).ok().filter(|&p| p != u32::MAX);
         match page {
             Some(page) => Ok(Addr { page, offset: offset as u16 }),
-            None => Err(Error::Invalid { path: "layout".into(), reason: "more than 2^32 - 1 pages".into() }),
+            None => Err(Error::invalid(&self.path, "more than 2^32 - 1 pages")),
         }
     }
 

@@ -29,7 +29,7 @@ pub(crate) struct CellVPages {
 
 /// Writes the visible V-pages of every cell, cell after cell, dfs order within a cell.
 pub(crate) fn write_cell_vpages(w: &WriteCtx<'_>, path: &Path, tag: [u8; 4]) -> Result<CellVPages> {
-    let mut p = Packer::new(PageFileWriter::create(path, tag, w.page_size)?);
+    let mut p = Packer::new(path, PageFileWriter::create(path, tag, w.page_size)?);
     let mut buf = Vec::new();
     let mut addrs = Vec::with_capacity(w.data.cells.len());
     for cell in &w.data.cells {
@@ -73,7 +73,8 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
         fanout: data.node_fanout.clone(),
         directory: Vec::new(),
     };
-    let mut p = Packer::new(PageFileWriter::create(&w.dir.join(INDEX_FILE), INDEX_TAG, w.page_size)?);
+    let index_path = w.dir.join(INDEX_FILE);
+    let mut p = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
     p.put(&meta.encode())?;
     p.align()?;
     let mut seg = vec![Addr::NIL; nodes];

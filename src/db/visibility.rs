@@ -1,0 +1,76 @@
+//! From per-cell DoV to V-pages and back.
+//!
+//! The V-page of node N for cell c holds one V-entry per entry of N: for an internal node the
+//! child node's (DoV, NVO), for a leaf the object's (DoV, 1 if visible else 0). A node gets a
+//! V-page in a cell only if some entry is visible there: hidden subtrees cost no storage.
+
+use hdov_storage::{LayoutReader, VData, VEntry};
+
+use crate::dov::precompute::CellDov;
+use crate::error::Result;
+use crate::rtree::RTree;
+
+/// V-data of the whole grid from the cells a build (or shard) computed; other cells stay empty.
+pub fn vdata_from_cells(tree: &RTree, cell_count: u32, cells: &[(u32, CellDov)]) -> VData {
+    let mut data = VData {
+        cell_count,
+        node_fanout: tree.nodes.iter().map(|n| n.entries.len() as u16).collect(),
+        cells: vec![Vec::new(); cell_count as usize],
+    };
+    for (cell, dov) in cells {
+        // Visible nodes are exactly those whose V-page has a visible entry; `dov.nodes` lists
+        // the visible nodes, so their parents are the nodes needing a V-page.
+        let mut pages: Vec<u32> = Vec::new();
+        for &(node, _, _) in &dov.nodes {
+            if let Some(p) = tree.nodes[node as usize].parent {
+                pages.push(p);
+            }
+            if tree.nodes[node as usize].is_leaf() {
+                pages.push(node);
+            }
+        }
+        pages.sort_unstable();
+        pages.dedup();
+        data.cells[*cell as usize] = pages
+            .into_iter()
+            .map(|id| {
+                let node = &tree.nodes[id as usize];
+                let entries = node
+                    .entries
+                    .iter()
+                    .map(|e| {
+                        if node.is_leaf() {
+                            let d = dov.object(e.child);
+                            VEntry { dov: d, nvo: u32::from(d > 0.0) }
+                        } else {
+                            let (d, nvo) = dov.node(e.child);
+                            VEntry { dov: d, nvo }
+                        }
+                    })
+                    .collect();
+                (id, entries)
+            })
+            .filter(|(_, e): &(u32, Vec<VEntry>)| e.iter().any(|v| !v.is_zero()))
+            .collect();
+    }
+    data
+}
+
+/// Reads the V-pages of `cells` back from a layout (for merging shard databases).
+pub fn read_cells(
+    reader: &mut LayoutReader,
+    cells: std::ops::Range<u32>,
+) -> Result<Vec<(u32, Vec<(u32, Vec<VEntry>)>)>> {
+    let mut out = Vec::with_capacity(cells.len());
+    for cell in cells {
+        reader.flip_to_cell(cell)?;
+        let mut pages = Vec::new();
+        for node in 0..reader.node_count() {
+            if let Some(v) = reader.vpage(node)? {
+                pages.push((node, v));
+            }
+        }
+        out.push((cell, pages));
+    }
+    Ok(out)
+}
