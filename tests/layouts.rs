@@ -1,0 +1,86 @@
+//! The three V-page layouts written by `hdov build` for a generated city hold the same
+//! V-entries, and those are exactly what the DoV precompute produced.
+
+use hdov::city::{CityParams, CityScale};
+use hdov::db::{self, BuildParams, Database, VisibilityParams};
+use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
+use hdov::dov::select::BackendChoice;
+use hdov::progress::Progress;
+use hdov::rtree::RTree;
+use hdov_storage::{LayoutKind, ReadMode};
+use proptest::prelude::*;
+
+const RESOLUTION: u32 = 24;
+
+struct Fixture {
+    _tmp: tempfile::TempDir,
+    db: Database,
+    expected: hdov_storage::VData,
+}
+
+fn fixture() -> Fixture {
+    let scene = hdov::city::generate(&CityParams { seed: 3, scale: CityScale::Tiny, ..Default::default() });
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("db");
+    let params = BuildParams {
+        page_size: 512,
+        visibility: Some(VisibilityParams {
+            resolution: RESOLUTION,
+            backend: BackendChoice::Cpu,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    db::build::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
+    // The same measurement, independently: the tree is deterministic, so are its V-pages.
+    let tree = RTree::build(&scene.all_object_bounds(), db::tree_page::fanout(512), params.tree);
+    let shape =
+        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+    let mut backend = hdov::dov::CpuBackend::new(&scene, RESOLUTION).unwrap();
+    let grid = scene.grid.unwrap();
+    let dov = precompute_shard(
+        &mut backend,
+        &grid,
+        &scene.all_object_bounds(),
+        &shape,
+        &PrecomputeOptions::default(),
+        Shard::ALL,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let expected = db::visibility::vdata_from_cells(&tree, grid.cell_count() as u32, &dov.cells);
+    Fixture { _tmp: tmp, db: Database::open(&dir).unwrap(), expected }
+}
+
+#[test]
+fn layouts_agree_with_each_other_and_with_the_precompute() {
+    let f = fixture();
+    assert_eq!(f.db.layouts(), LayoutKind::ALL.to_vec());
+    let readers = std::cell::RefCell::new(
+        LayoutKind::ALL.iter().map(|&k| f.db.layout(k, ReadMode::Mmap).unwrap()).collect::<Vec<_>>(),
+    );
+    let cells = f.expected.cell_count;
+    let nodes = f.db.node_count();
+    assert!(nodes > 3, "a 512-byte page gives a tree with several nodes");
+    let visible: usize = f.expected.cells.iter().map(|c| c.len()).sum();
+    assert!(visible > cells as usize, "the city is visible from its streets");
+    let config = ProptestConfig { cases: 200, ..Default::default() };
+    proptest!(config, |(cell in 0..cells, node in 0..nodes)| {
+        let want = f.expected.cells[cell as usize].iter().find(|(n, _)| *n == node).map(|(_, v)| v.clone());
+        for r in readers.borrow_mut().iter_mut() {
+            r.flip_to_cell(cell).unwrap();
+            prop_assert_eq!(r.vpage(node).unwrap(), want.clone(), "{} cell {} node {}", r.kind(), cell, node);
+        }
+    });
+    // And exhaustively, every (cell, node); a horizontal flip reads nothing.
+    for cell in 0..cells {
+        for r in readers.borrow_mut().iter_mut() {
+            let flip = r.flip_to_cell(cell).unwrap();
+            if r.kind() == LayoutKind::Horizontal {
+                assert_eq!(flip.pages_read, 0);
+            }
+            let got: Vec<_> = (0..nodes).filter_map(|n| r.vpage(n).unwrap().map(|v| (n, v))).collect();
+            assert_eq!(got, f.expected.cells[cell as usize], "{} cell {cell}", r.kind());
+        }
+    }
+}
