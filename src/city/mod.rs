@@ -5,14 +5,15 @@
 //! generates such a city, deterministically from a seed:
 //!
 //! - a street grid (streets 10–16 m, avenues 18–22 m) around blocks of 60–120 m, cut into lots
-//!   ([`layout`]);
-//! - on each lot one building ([`building`]): a house (6–15 m) or a tower (30–150 m, likelier and
+//!   (`layout.rs`);
+//! - on each lot one building (`building.rs`, from parts in `builder.rs`): a house (6–15 m) or a tower (30–150 m, likelier and
 //!   taller downtown) with plinths, ledges and cornices, setback tiers, recessed windows and a
 //!   roof, of 240–1,800 triangles;
 //! - in plazas (about 7 % of the blocks), six instances each of one dense detail model
-//!   ([`detail`]): the user's model, normalised to statue size, or a procedural figure of 69,312
+//!   (`detail.rs`): the user's model, normalised to statue size, or a procedural figure of 69,312
 //!   triangles;
-//! - a viewing-cell grid over the whole footprint at eye height (y 1.5–2.0 m, one layer).
+//! - a viewing-cell grid over the whole footprint at eye height (y 1.5–2.0 m, one layer), with
+//!   cells of 30–50 m: `tiny` ≈ 40 cells, `small` ≈ 220, `default` ≈ 840, `large` ≈ 4,200.
 //!
 //! **Storage.** Every building is its own base mesh (so buildings differ, as in a real city, and
 //! each gets its own leaf LODs), instanced once under a translation (and possibly a half turn)
@@ -24,9 +25,10 @@
 //! Objects are named `b00012_tower`, `b00013_house` (the building's index) and `detail_0003`;
 //! base meshes carry the same names (`detail` for the detail model).
 //!
-//! **Determinism.** Each street line, block and building draws from its own random stream derived
-//! from the seed and its index ([`rng`]), so the scene is identical bit for bit for a seed
-//! whatever the thread count, and buildings are generated in parallel (rayon).
+//! **Determinism.** The street grid, the choice of plazas, each block and each building draw
+//! from their own random streams, derived from the seed and their index (`rng.rs`, SplitMix64),
+//! so the scene is identical bit for bit for a seed whatever the thread count, and buildings are
+//! generated in parallel (rayon).
 
 mod builder;
 mod building;
@@ -41,7 +43,7 @@ use glam::{Mat4, Quat, Vec2, Vec3};
 use rayon::prelude::*;
 
 pub use building::{BuildingKind, MAX_TRIANGLES as MAX_BUILDING_TRIANGLES, MIN_TRIANGLES as MIN_BUILDING_TRIANGLES};
-pub use detail::{DETAIL_HEIGHT, normalise_detail, procedural_detail};
+pub use detail::{DETAIL_HEIGHT, DETAIL_MAX_WIDTH, normalise_detail, procedural_detail};
 
 use crate::error::Error;
 use crate::geom::Aabb;
