@@ -315,13 +315,18 @@ fn positive_f32(d: f64) -> f32 {
     (d as f32).clamp(f32::MIN_POSITIVE, 1.0)
 }
 
-/// How well corner sampling and the zero-DoV floor match dense sampling, over some cells.
+/// How well sparse sampling and the zero-DoV floor match dense sampling, over some cells.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ZeroDovAudit {
+    /// Interior points used besides the corners (the first K of the dense Halton points).
+    pub interior_samples: u32,
+    /// The floor test's margin.
+    pub margin: f32,
     pub cells: usize,
-    /// (cell, object) pairs seen by some corner.
-    pub corner_visible: usize,
-    /// Pairs seen by some dense interior point but by no corner: the visible zero-DoV objects.
+    /// (cell, object) pairs seen by some sparse sample point (corners + K interior).
+    pub sparse_visible: usize,
+    /// Pairs seen by some dense interior point but by no sparse point: the visible zero-DoV
+    /// objects.
     pub zero_dov: usize,
     /// Of those, how many the floor test catches.
     pub caught: usize,
@@ -330,43 +335,59 @@ pub struct ZeroDovAudit {
 }
 
 /// Measures, for each cell in `cells`, which objects `dense` Halton interior points see that the
-/// corners do not, and how many of those the floor test with `margin` catches. Costs
-/// (8 + dense) measurements per cell (corners are not shared here: this is an audit).
+/// sparse sample points (corners + the first K Halton points, for each K in `interior_samples`)
+/// do not, and how many of those the floor test catches for each of `margins`: one
+/// [`ZeroDovAudit`] per (K, margin), K-major. Points inside geometry (more than half back faces)
+/// are left out, as [`precompute_shard`] does by default. Costs (8 + dense) measurements per
+/// cell (corners are not shared here: this is an audit, not a build).
 pub fn audit_zero_dov(
     backend: &mut dyn DovBackend,
     grid: &ViewGrid,
     object_bounds: &[Aabb],
     cells: impl IntoIterator<Item = usize>,
     dense: u32,
-    margin: f32,
-) -> Result<ZeroDovAudit> {
-    let mut audit = ZeroDovAudit::default();
+    interior_samples: &[u32],
+    margins: &[f32],
+) -> Result<Vec<ZeroDovAudit>> {
+    use std::collections::HashSet;
+    let mut audits: Vec<ZeroDovAudit> = interior_samples
+        .iter()
+        .flat_map(|&k| margins.iter().map(move |&margin| (k, margin)))
+        .map(|(interior_samples, margin)| ZeroDovAudit { interior_samples, margin, ..Default::default() })
+        .collect();
+    let mut seen_from = |p: Vec3| -> Result<HashSet<u32>> {
+        let d = backend.measure(p)?;
+        Ok(if d.back_face <= 0.5 { d.objects.iter().map(|e| e.0).collect() } else { HashSet::new() })
+    };
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
-        let mut by_corner = std::collections::HashSet::new();
+        let mut by_corner = HashSet::new();
         for c in grid.cell_corners(coords) {
-            let d = backend.measure(grid.corner_position(grid.corner_coords(c)))?;
-            by_corner.extend(d.objects.iter().map(|e| e.0));
+            by_corner.extend(seen_from(grid.corner_position(grid.corner_coords(c)))?);
         }
-        let mut by_dense = by_corner.clone();
-        for p in interior_points(&cell_box, dense) {
-            by_dense.extend(backend.measure(p)?.objects.iter().map(|e| e.0));
-        }
-        let near = Aabb::new(cell_box.min - Vec3::splat(margin), cell_box.max + Vec3::splat(margin));
-        audit.cells += 1;
-        audit.corner_visible += by_corner.len();
-        for (object, bounds) in object_bounds.iter().enumerate() {
-            let object = object as u32;
-            if by_corner.contains(&object) {
-                continue;
+        let interior: Vec<HashSet<u32>> =
+            interior_points(&cell_box, dense).into_iter().map(&mut seen_from).collect::<Result<_>>()?;
+        let by_dense: HashSet<u32> = interior.iter().flatten().chain(&by_corner).copied().collect();
+        for audit in &mut audits {
+            let k = (audit.interior_samples as usize).min(interior.len());
+            let sparse: HashSet<u32> = interior[..k].iter().flatten().chain(&by_corner).copied().collect();
+            let m = Vec3::splat(audit.margin);
+            let near = Aabb::new(cell_box.min - m, cell_box.max + m);
+            audit.cells += 1;
+            audit.sparse_visible += sparse.len();
+            for (object, bounds) in object_bounds.iter().enumerate() {
+                let object = object as u32;
+                if sparse.contains(&object) {
+                    continue;
+                }
+                let floored = !bounds.is_empty() && bounds.intersects(&near);
+                let seen = by_dense.contains(&object);
+                audit.zero_dov += seen as usize;
+                audit.caught += (seen && floored) as usize;
+                audit.false_floors += (floored && !seen) as usize;
             }
-            let floored = !bounds.is_empty() && bounds.intersects(&near);
-            let seen = by_dense.contains(&object);
-            audit.zero_dov += seen as usize;
-            audit.caught += (seen && floored) as usize;
-            audit.false_floors += (floored && !seen) as usize;
         }
     }
-    Ok(audit)
+    Ok(audits)
 }
