@@ -244,8 +244,8 @@ fn neighbour_corner_floor_test() {
         let options = PrecomputeOptions { zero_dov_tests: tests, ..Default::default() };
         precompute_shard(backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap()
     };
-    let lower = grid.cell_id([0, 0, 0]) as usize;
-    let upper = grid.cell_id([0, 1, 0]) as usize;
+    let lower = grid.cell_id([0, 0, 0]);
+    let upper = grid.cell_id([0, 1, 0]);
     let plain = run(vec![FloorTest::BoxWithin(0.0)], &mut backend);
     assert_eq!(plain.cells[lower].1.object(target), 0.0);
     assert!(plain.cells[upper].1.object(target) > backend.cube_map().texel_floor() as f32);

@@ -14,6 +14,7 @@
 //! concatenation.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 
 use glam::Vec3;
 
@@ -266,11 +267,10 @@ pub fn precompute_shard(
         let cell_box = grid.cell_box(coords);
         let needed = corners_of(coords);
         for &corner in &needed {
-            if !corner_dov.contains_key(&corner) {
-                let d = backend.measure(grid.corner_position(grid.corner_coords(corner)))?;
+            if let Entry::Vacant(slot) = corner_dov.entry(corner) {
+                slot.insert(backend.measure(grid.corner_position(grid.corner_coords(corner)))?);
                 done += 1;
                 progress(done, total);
-                corner_dov.insert(corner, d);
             }
         }
         let mut interior = Vec::with_capacity(options.interior_samples as usize);
@@ -439,9 +439,8 @@ pub fn audit_zero_dov(
         let cell_box = grid.cell_box(coords);
         let hood = neighbourhood_corners(grid, coords);
         for &c in &hood {
-            if !corner_seen.contains_key(&c) {
-                let seen = seen_from(grid.corner_position(grid.corner_coords(c)))?;
-                corner_seen.insert(c, seen);
+            if let Entry::Vacant(slot) = corner_seen.entry(c) {
+                slot.insert(seen_from(grid.corner_position(grid.corner_coords(c)))?);
             }
         }
         let own = grid.cell_corners(coords);
