@@ -226,10 +226,12 @@ pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
 
 /// Computes the [`CellDov`] of every cell of `shard`.
 ///
-/// Every corner that a shard cell uses is measured exactly once (kept until its last cell is
-/// done, so memory holds about two layers of corners), interior points once per cell. `progress`
-/// is called with `(points done, points total)` after each measurement. Costs (distinct corners
-/// + K·cells) backend measurements plus, per cell, O(visible objects × tree depth × points).
+/// Every corner that a shard cell uses — its own 8, plus its neighbours' with
+/// [`FloorTest::NeighbourCorners`] — is measured exactly once and kept until the last cell that
+/// uses it is done (memory: about two layers of corners, four with the neighbour test); interior
+/// points are measured once per cell. `progress` is called with `(points done, points total)`
+/// after each measurement. Costs (distinct corners + K·cells) backend measurements plus, per cell,
+/// O(visible objects × tree depth × points + objects) for the floor tests.
 pub fn precompute_shard(
     backend: &mut dyn DovBackend,
     grid: &ViewGrid,
