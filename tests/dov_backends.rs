@@ -152,3 +152,22 @@ fn gpu_backend_reports_its_adapter() {
     assert!(gpu.name().contains(gpu.adapter_name()) && !gpu.adapter_name().is_empty());
     assert_eq!(Some(gpu.adapter_name().to_string()), hdov::dov::gpu::adapter_available());
 }
+
+#[test]
+fn backend_kinds_parse_and_open() {
+    use hdov::dov::{BackendKind, open_backend};
+    assert_eq!("cpu".parse::<BackendKind>().unwrap(), BackendKind::Cpu);
+    assert_eq!("auto".parse::<BackendKind>().unwrap(), BackendKind::Auto);
+    assert!("metal".parse::<BackendKind>().is_err());
+    let scene = sphere_scene(1, Vec3::new(0.0, 0.0, 3.0), 1.0);
+    let cpu = open_backend(&scene, 8, BackendKind::Cpu).unwrap();
+    assert!(cpu.name().starts_with("cpu"));
+    // Auto never fails for want of an adapter; it picks the GPU when one exists.
+    let auto = open_backend(&scene, 8, BackendKind::Auto).unwrap();
+    let has_adapter = hdov::dov::gpu::adapter_available().is_some();
+    assert_eq!(auto.name().starts_with("gpu"), has_adapter, "{}", auto.name());
+    // Bad arguments are errors, not panics.
+    assert!(open_backend(&scene, 0, BackendKind::Cpu).is_err());
+    let mut b = open_backend(&scene, 8, BackendKind::Cpu).unwrap();
+    assert!(b.measure(Vec3::NAN).is_err());
+}

@@ -4,7 +4,9 @@ mod dov_common;
 
 use dov_common::*;
 use glam::Vec3;
-use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, audit_zero_dov, cell_dov, precompute_shard};
+use hdov::dov::precompute::{
+    CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, audit_zero_dov, cell_dov, precompute_shard,
+};
 use hdov::dov::{CpuBackend, CubeMap, DovBackend, IdCube, PointDov};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -105,8 +107,18 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
     }
     merged.sort_by_key(|c| c.0);
     assert_eq!(merged, whole.cells, "merged shards differ from the whole");
-    // Shards recompute the corners on their borders, never more than every cell's 8.
-    assert!(measured > whole.points_measured && measured < 8 * grid.cell_count());
+    // Shards recompute the corners on (and, for the neighbour floor test, one layer beyond)
+    // their borders; each shard measures each of its corners once.
+    assert!(measured > whole.points_measured && measured <= 3 * grid.corner_count());
+    let corners_only = PrecomputeOptions { zero_dov_tests: vec![FloorTest::BoxWithin(0.0)], ..Default::default() };
+    let mut measured = 0;
+    for i in 0..3 {
+        let shard = Shard { index: i, count: 3 };
+        measured += precompute_shard(&mut backend, &grid, &bounds, &shape, &corners_only, shard, &mut |_, _| {})
+            .unwrap()
+            .points_measured;
+    }
+    assert!(measured < 8 * grid.cell_count(), "shards without the neighbour test measure {measured} corners");
     assert!(Shard::parse("3/3").is_err() && Shard::parse("1-3").is_err() && Shard::parse("0/0").is_err());
 }
 
@@ -119,7 +131,8 @@ fn node_dov_is_max_of_sums_not_sum_of_maxima() {
     let points = [point(vec![(0, 0.30), (1, 0.05)]), point(vec![(0, 0.05), (1, 0.30), (2, 0.01)])];
     let bounds = vec![Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)); 3];
     let cell = Aabb::new(Vec3::ZERO, Vec3::ONE);
-    let c = cell_dov(&points, &cell, &bounds, &shape, &PrecomputeOptions::default(), &CubeMap::new(64));
+    let points: Vec<&PointDov> = points.iter().collect();
+    let c = cell_dov(&points, &[], &cell, &bounds, &shape, &PrecomputeOptions::default(), &CubeMap::new(64));
     assert_eq!(c.object(0), 0.30);
     assert_eq!(c.object(1), 0.30);
     let (leaf, leaf_nvo) = c.node(1);
@@ -165,8 +178,7 @@ fn cell_dovs_from_a_real_scene_are_consistent() {
 
 /// A small box inside a square tube along x: no corner of the cell around it sees it (the tube's
 /// walls are in the way), a point on the tube's axis does. The floor test catches it.
-#[test]
-fn visible_zero_dov_object_gets_the_one_texel_floor() {
+fn tube_scene() -> (hdov::scene::Scene, u32) {
     let mut b = SceneBuilder::default();
     let target = b.aabox(Vec3::new(2.0, -0.1, -0.1), Vec3::new(2.2, 0.1, 0.1));
     // Tube walls (|y|, |z| ≤ 0.5 inside), x from -3 to 3.
@@ -174,7 +186,12 @@ fn visible_zero_dov_object_gets_the_one_texel_floor() {
     b.aabox(Vec3::new(-3.0, -0.6, -0.6), Vec3::new(3.0, -0.5, 0.6));
     b.aabox(Vec3::new(-3.0, -0.5, 0.5), Vec3::new(3.0, 0.5, 0.6));
     b.aabox(Vec3::new(-3.0, -0.5, -0.6), Vec3::new(3.0, 0.5, -0.5));
-    let scene = b.build();
+    (b.build(), target)
+}
+
+#[test]
+fn visible_zero_dov_object_gets_the_one_texel_floor() {
+    let (scene, target) = tube_scene();
     let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)] };
     // One cell straddling the tube: corners outside it, the centre on its axis.
     let grid = ViewGrid::new(Aabb::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, 1.0, 1.0)), [1, 1, 1]);
@@ -182,12 +199,12 @@ fn visible_zero_dov_object_gets_the_one_texel_floor() {
     let mut backend = CpuBackend::new(&scene, 64).unwrap();
     assert!(backend.measure(Vec3::ZERO).unwrap().get(target) > 0.0, "the axis point sees the target");
 
-    let no_floor = PrecomputeOptions { zero_dov_margin: None, ..Default::default() };
+    let no_floor = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
     let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &no_floor, Shard::ALL, &mut |_, _| {}).unwrap();
     assert_eq!(out.cells[0].1.object(target), 0.0, "a corner sees the target: the test scene is wrong");
 
     // The target's box is 1 unit from the cell: a margin of 1.5 reaches it.
-    let floor = PrecomputeOptions { zero_dov_margin: Some(1.5), ..Default::default() };
+    let floor = PrecomputeOptions { zero_dov_tests: vec![FloorTest::BoxWithin(1.5)], ..Default::default() };
     let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &floor, Shard::ALL, &mut |_, _| {}).unwrap();
     let cell = &out.cells[0].1;
     let want = backend.cube_map().texel_floor() as f32;
@@ -197,10 +214,44 @@ fn visible_zero_dov_object_gets_the_one_texel_floor() {
 
     // The audit finds it with dense interior points (the cell centre is among them) and counts it
     // as caught by the floor.
-    let audit = audit_zero_dov(&mut backend, &grid, &bounds, 0..1, 64, 1.5).unwrap();
-    assert_eq!(audit.cells, 1);
-    assert_eq!(audit.zero_dov, 1, "{audit:?}");
-    assert_eq!(audit.caught, 1, "{audit:?}");
+    let audit = audit_zero_dov(
+        &mut backend,
+        &grid,
+        &bounds,
+        0..1,
+        64,
+        &[0],
+        &[FloorTest::BoxWithin(0.5), FloorTest::BoxWithin(1.5)],
+    )
+    .unwrap();
+    assert_eq!(audit[0].cells, 1);
+    assert_eq!(audit[0].zero_dov, 1, "{audit:?}");
+    assert_eq!(audit[0].caught, 0, "a margin of 0.5 does not reach the target: {audit:?}");
+    assert_eq!(audit[1].caught, 1, "{audit:?}");
+}
+
+/// The neighbour-corner floor test: the upper cell's top corners lie inside the tube and see the
+/// target; the lower cell's corners do not, and its box is far from the target, so only the
+/// neighbour test floors it there.
+#[test]
+fn neighbour_corner_floor_test() {
+    let (scene, target) = tube_scene();
+    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)] };
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(-1.0, -1.8, -0.2), Vec3::new(1.0, 0.2, 0.2)), [1, 2, 1]);
+    let bounds = scene.all_object_bounds();
+    let mut backend = CpuBackend::new(&scene, 64).unwrap();
+    let run = |tests: Vec<FloorTest>, backend: &mut CpuBackend| {
+        let options = PrecomputeOptions { zero_dov_tests: tests, ..Default::default() };
+        precompute_shard(backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap()
+    };
+    let lower = grid.cell_id([0, 0, 0]);
+    let upper = grid.cell_id([0, 1, 0]);
+    let plain = run(vec![FloorTest::BoxWithin(0.0)], &mut backend);
+    assert_eq!(plain.cells[lower].1.object(target), 0.0);
+    assert!(plain.cells[upper].1.object(target) > backend.cube_map().texel_floor() as f32);
+    let with_neighbours = run(vec![FloorTest::NeighbourCorners], &mut backend);
+    assert_eq!(with_neighbours.cells[lower].1.object(target), backend.cube_map().texel_floor() as f32);
+    assert_eq!(with_neighbours.cells[upper].1, plain.cells[upper].1, "a cell that sees it is unchanged");
 }
 
 #[test]
@@ -214,7 +265,7 @@ fn points_inside_geometry_are_skipped() {
     let grid = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::splat(2.0)), [1, 1, 1]);
     let bounds = scene.all_object_bounds();
     let mut backend = CpuBackend::new(&scene, 32).unwrap();
-    let options = PrecomputeOptions { zero_dov_margin: None, ..Default::default() };
+    let options = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
     let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
     let cell = &out.cells[0].1;
     assert_eq!(cell.skipped_points, 1);

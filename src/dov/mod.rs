@@ -157,3 +157,41 @@ pub fn default_near(scene_bounds: &crate::geom::Aabb) -> f32 {
     let diag = scene_bounds.extent().length();
     if diag.is_finite() { (diag * 1e-4).max(1e-4) } else { 1e-4 }
 }
+
+/// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BackendKind {
+    /// The GPU backend when an adapter exists, else the CPU backend.
+    #[default]
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = crate::Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(BackendKind::Auto),
+            "gpu" => Ok(BackendKind::Gpu),
+            "cpu" => Ok(BackendKind::Cpu),
+            _ => Err(crate::Error::bad_arg("--backend", format!("'{s}': expected auto, gpu or cpu"))),
+        }
+    }
+}
+
+/// Opens the backend `kind` for `scene` at `resolution`. `Auto` falls back to the CPU backend
+/// when no GPU adapter exists or the GPU backend cannot be set up (the reason is dropped: ask for
+/// `Gpu` explicitly to see it). Costs the backend's construction: a BVH build or an upload.
+pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendKind) -> Result<Box<dyn DovBackend>> {
+    match kind {
+        BackendKind::Cpu => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
+        BackendKind::Gpu => Ok(Box::new(GpuBackend::new(scene, resolution)?)),
+        BackendKind::Auto => match GpuBackend::new(scene, resolution) {
+            Ok(gpu) => Ok(Box::new(gpu)),
+            Err(crate::Error::Gpu(_)) => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
+            Err(e) => Err(e),
+        },
+    }
+}

@@ -6,14 +6,15 @@
 //! - node DoV = max over the sample points of the *sum* of the point DoVs of the objects under the
 //!   node (the max of sums, which stays ≤ 1; not the sum of maxima);
 //! - NVO = number of objects under the node whose cell DoV is > 0;
-//! - *visible zero-DoV* objects (§5.5.2): objects no sample point sees but whose box lies within
-//!   [`PrecomputeOptions::zero_dov_margin`] of the cell get the one-texel floor
+//! - *visible zero-DoV* objects (§5.5.2): objects no sample point sees but that one of the
+//!   [`PrecomputeOptions::zero_dov_tests`] finds possibly visible get the one-texel floor
 //!   [`CubeMap::texel_floor`], so that a query still fetches them (at a coarse LOD).
 //!
 //! Work can be split into shards of disjoint cells ([`Shard`]); their outputs merge by
 //! concatenation.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 
 use glam::Vec3;
 
@@ -127,15 +128,30 @@ impl Shard {
     }
 }
 
+/// A test that marks an object *possibly visible* from a cell although none of the cell's sample
+/// points sees it; such objects get the one-texel floor DoV.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FloorTest {
+    /// The object's box lies within this distance of the cell's box (near objects: the corners
+    /// can all be cut off from an object right next to the cell).
+    BoxWithin(f32),
+    /// Some corner of a neighbouring cell (the 4 × 4 × 4 block of corners around the cell,
+    /// clipped to the grid) sees the object: views change continuously, so an object that a
+    /// point just outside the cell sees is often seen from inside. Free in measurements: the
+    /// neighbours' corners are measured for their own cells anyway (a shard measures one extra
+    /// layer of corners around its cells).
+    NeighbourCorners,
+}
+
 /// Options of a precomputation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PrecomputeOptions {
     /// Interior sample points per cell besides the 8 corners (Halton points in bases 2, 3, 5:
     /// well spread, the same relative positions in every cell). 0 = corners only (the thesis).
     pub interior_samples: u32,
-    /// An object that no sample point sees gets the one-texel floor DoV when its box lies within
-    /// this distance of the cell's box. `None` disables the floor.
-    pub zero_dov_margin: Option<f32>,
+    /// Objects that no sample point sees but any of these tests finds possibly visible get the
+    /// one-texel floor. Empty: no floor.
+    pub zero_dov_tests: Vec<FloorTest>,
     /// Leave out sample points whose view is mostly back faces (more than half the sphere): they
     /// lie inside a closed mesh and would give its walls a DoV near 1. When all points of a cell
     /// are inside, they are all kept.
@@ -144,8 +160,38 @@ pub struct PrecomputeOptions {
 
 impl Default for PrecomputeOptions {
     fn default() -> Self {
-        Self { interior_samples: 0, zero_dov_margin: Some(0.0), skip_inside_points: true }
+        Self {
+            interior_samples: 0,
+            zero_dov_tests: vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
+            skip_inside_points: true,
+        }
     }
+}
+
+impl PrecomputeOptions {
+    fn uses_neighbours(&self) -> bool {
+        self.zero_dov_tests.contains(&FloorTest::NeighbourCorners)
+    }
+}
+
+/// The corner ids of the 4 × 4 × 4 block around cell `c` (its own 8 corners and those of its 26
+/// neighbours), clipped to the grid.
+pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3]) -> Vec<usize> {
+    let range = |a: usize| c[a].saturating_sub(1)..=(c[a] + 2).min(grid.dims[a]);
+    let mut out = Vec::with_capacity(64);
+    for y in range(1) {
+        for z in range(2) {
+            for x in range(0) {
+                out.push(grid.corner_id([x, y, z]));
+            }
+        }
+    }
+    out
+}
+
+/// Whether a sample point's view counts (see [`PrecomputeOptions::skip_inside_points`]).
+fn is_inside(p: &PointDov) -> bool {
+    p.back_face > 0.5
 }
 
 /// The output of one shard.
@@ -180,10 +226,12 @@ pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
 
 /// Computes the [`CellDov`] of every cell of `shard`.
 ///
-/// Every corner that a shard cell uses is measured exactly once (kept until its last cell is
-/// done, so memory holds about two layers of corners), interior points once per cell. `progress`
-/// is called with `(points done, points total)` after each measurement. Costs (distinct corners
-/// + K·cells) backend measurements plus, per cell, O(visible objects × tree depth × points).
+/// Every corner that a shard cell uses — its own 8, plus its neighbours' with
+/// [`FloorTest::NeighbourCorners`] — is measured exactly once and kept until the last cell that
+/// uses it is done (memory: about two layers of corners, four with the neighbour test); interior
+/// points are measured once per cell. `progress` is called with `(points done, points total)`
+/// after each measurement. Costs (distinct corners + K·cells) backend measurements plus, per cell,
+/// O(visible objects × tree depth × points + objects) for the floor tests.
 pub fn precompute_shard(
     backend: &mut dyn DovBackend,
     grid: &ViewGrid,
@@ -199,10 +247,14 @@ pub fn precompute_shard(
         return Err(Error::bad_arg("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
     let cells = shard.cells(grid);
+    let neighbours = options.uses_neighbours();
+    let corners_of = |coords: [u32; 3]| -> Vec<usize> {
+        if neighbours { neighbourhood_corners(grid, coords) } else { grid.cell_corners(coords).to_vec() }
+    };
     // How many shard cells still need each corner: drop a corner's DoV after its last cell.
     let mut corner_uses: HashMap<usize, u32> = HashMap::new();
     for id in cells.clone() {
-        for c in grid.cell_corners(grid.cell_coords(id)) {
+        for c in corners_of(grid.cell_coords(id)) {
             *corner_uses.entry(c).or_insert(0) += 1;
         }
     }
@@ -215,50 +267,52 @@ pub fn precompute_shard(
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
-        let mut points: Vec<PointDov> = Vec::with_capacity(8 + options.interior_samples as usize);
-        for corner in grid.cell_corners(coords) {
-            let dov = match corner_dov.get(&corner) {
-                Some(d) => d.clone(),
-                None => {
-                    let d = backend.measure(grid.corner_position(grid.corner_coords(corner)))?;
-                    done += 1;
-                    progress(done, total);
-                    corner_dov.insert(corner, d.clone());
-                    d
-                }
-            };
-            let uses = corner_uses.get_mut(&corner).expect("every corner of a shard cell is counted");
+        let needed = corners_of(coords);
+        for &corner in &needed {
+            if let Entry::Vacant(slot) = corner_dov.entry(corner) {
+                slot.insert(backend.measure(grid.corner_position(grid.corner_coords(corner)))?);
+                done += 1;
+                progress(done, total);
+            }
+        }
+        let mut interior = Vec::with_capacity(options.interior_samples as usize);
+        for p in interior_points(&cell_box, options.interior_samples) {
+            interior.push(backend.measure(p)?);
+            done += 1;
+            progress(done, total);
+        }
+        let own = grid.cell_corners(coords);
+        let points: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
+        let around: Vec<&PointDov> = needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]).collect();
+        out.cells.push((id as u32, cell_dov(&points, &around, &cell_box, object_bounds, shape, options, &cube)));
+        for corner in needed {
+            let uses = corner_uses.get_mut(&corner).expect("every needed corner is counted");
             *uses -= 1;
             if *uses == 0 {
                 corner_dov.remove(&corner);
             }
-            points.push(dov);
         }
-        for p in interior_points(&cell_box, options.interior_samples) {
-            points.push(backend.measure(p)?);
-            done += 1;
-            progress(done, total);
-        }
-        out.cells.push((id as u32, cell_dov(&points, &cell_box, object_bounds, shape, options, &cube)));
     }
     out.points_measured = done;
     Ok(out)
 }
 
 /// Combines the point DoVs of one cell's sample points into its [`CellDov`] (see the module
-/// documentation for the rules). Pure; O(Σ visible objects per point × tree depth).
+/// documentation for the rules); `around` are the neighbouring cells' corners, used only by
+/// [`FloorTest::NeighbourCorners`]. Pure; O(Σ visible objects per point × tree depth).
 pub fn cell_dov(
-    points: &[PointDov],
+    points: &[&PointDov],
+    around: &[&PointDov],
     cell_box: &Aabb,
     object_bounds: &[Aabb],
     shape: &TreeShape,
     options: &PrecomputeOptions,
     cube: &CubeMap,
 ) -> CellDov {
-    let inside = |p: &&PointDov| options.skip_inside_points && p.back_face > 0.5;
+    let inside = |p: &&&PointDov| options.skip_inside_points && is_inside(p);
     let skipped = points.iter().filter(inside).count();
     let keep_all = skipped == points.len();
-    let used: Vec<&PointDov> = points.iter().filter(|p| keep_all || !inside(p)).collect();
+    let used: Vec<&PointDov> = points.iter().filter(|p| keep_all || !inside(p)).copied().collect();
 
     let mut object_max: HashMap<u32, f64> = HashMap::new();
     let mut node_max: HashMap<u32, f64> = HashMap::new();
@@ -279,12 +333,26 @@ pub fn cell_dov(
     }
 
     let mut floored = 0;
-    if let Some(margin) = options.zero_dov_margin {
-        let near = Aabb::new(cell_box.min - Vec3::splat(margin), cell_box.max + Vec3::splat(margin));
+    if !options.zero_dov_tests.is_empty() {
+        let seen_around: std::collections::HashSet<u32> = if options.uses_neighbours() {
+            around.iter().filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect()
+        } else {
+            Default::default()
+        };
         let floor = cube.texel_floor();
         for (object, bounds) in object_bounds.iter().enumerate() {
             let object = object as u32;
-            if !bounds.is_empty() && bounds.intersects(&near) && !object_max.contains_key(&object) {
+            if object_max.contains_key(&object) {
+                continue;
+            }
+            let possibly_visible = options.zero_dov_tests.iter().any(|t| match *t {
+                FloorTest::BoxWithin(margin) => {
+                    let m = Vec3::splat(margin);
+                    !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
+                }
+                FloorTest::NeighbourCorners => seen_around.contains(&object),
+            });
+            if possibly_visible {
                 object_max.insert(object, floor);
                 floored += 1;
                 // Keep node DoV ≥ every object DoV below it (queries prune by node DoV).
@@ -315,13 +383,18 @@ fn positive_f32(d: f64) -> f32 {
     (d as f32).clamp(f32::MIN_POSITIVE, 1.0)
 }
 
-/// How well corner sampling and the zero-DoV floor match dense sampling, over some cells.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// How well sparse sampling and a floor test match dense sampling, over some cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ZeroDovAudit {
+    /// Interior points used besides the corners (the first K of the dense Halton points).
+    pub interior_samples: u32,
+    /// The floor test evaluated.
+    pub test: FloorTest,
     pub cells: usize,
-    /// (cell, object) pairs seen by some corner.
-    pub corner_visible: usize,
-    /// Pairs seen by some dense interior point but by no corner: the visible zero-DoV objects.
+    /// (cell, object) pairs seen by some sparse sample point (corners + K interior).
+    pub sparse_visible: usize,
+    /// Pairs seen by some dense interior point but by no sparse point: the visible zero-DoV
+    /// objects.
     pub zero_dov: usize,
     /// Of those, how many the floor test catches.
     pub caught: usize,
@@ -330,43 +403,77 @@ pub struct ZeroDovAudit {
 }
 
 /// Measures, for each cell in `cells`, which objects `dense` Halton interior points see that the
-/// corners do not, and how many of those the floor test with `margin` catches. Costs
-/// (8 + dense) measurements per cell (corners are not shared here: this is an audit).
+/// sparse sample points (corners + the first K Halton points, for each K in `interior_samples`)
+/// do not, and how many of those each floor test in `tests` catches: one [`ZeroDovAudit`] per
+/// (K, test), K-major. Points inside geometry (more than half back faces) are left out, as
+/// [`precompute_shard`] does by default. Costs one measurement per distinct corner of the cells'
+/// neighbourhoods plus `dense` per cell.
 pub fn audit_zero_dov(
     backend: &mut dyn DovBackend,
     grid: &ViewGrid,
     object_bounds: &[Aabb],
     cells: impl IntoIterator<Item = usize>,
     dense: u32,
-    margin: f32,
-) -> Result<ZeroDovAudit> {
-    let mut audit = ZeroDovAudit::default();
+    interior_samples: &[u32],
+    tests: &[FloorTest],
+) -> Result<Vec<ZeroDovAudit>> {
+    use std::collections::HashSet;
+    let mut audits: Vec<ZeroDovAudit> = interior_samples
+        .iter()
+        .flat_map(|&k| tests.iter().map(move |&test| (k, test)))
+        .map(|(interior_samples, test)| ZeroDovAudit {
+            interior_samples,
+            test,
+            cells: 0,
+            sparse_visible: 0,
+            zero_dov: 0,
+            caught: 0,
+            false_floors: 0,
+        })
+        .collect();
+    let mut seen_from = |p: Vec3| -> Result<HashSet<u32>> {
+        let d = backend.measure(p)?;
+        Ok(if is_inside(&d) { HashSet::new() } else { d.objects.iter().map(|e| e.0).collect() })
+    };
+    let mut corner_seen: HashMap<usize, HashSet<u32>> = HashMap::new();
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
-        let mut by_corner = std::collections::HashSet::new();
-        for c in grid.cell_corners(coords) {
-            let d = backend.measure(grid.corner_position(grid.corner_coords(c)))?;
-            by_corner.extend(d.objects.iter().map(|e| e.0));
-        }
-        let mut by_dense = by_corner.clone();
-        for p in interior_points(&cell_box, dense) {
-            by_dense.extend(backend.measure(p)?.objects.iter().map(|e| e.0));
-        }
-        let near = Aabb::new(cell_box.min - Vec3::splat(margin), cell_box.max + Vec3::splat(margin));
-        audit.cells += 1;
-        audit.corner_visible += by_corner.len();
-        for (object, bounds) in object_bounds.iter().enumerate() {
-            let object = object as u32;
-            if by_corner.contains(&object) {
-                continue;
+        let hood = neighbourhood_corners(grid, coords);
+        for &c in &hood {
+            if let Entry::Vacant(slot) = corner_seen.entry(c) {
+                slot.insert(seen_from(grid.corner_position(grid.corner_coords(c)))?);
             }
-            let floored = !bounds.is_empty() && bounds.intersects(&near);
-            let seen = by_dense.contains(&object);
-            audit.zero_dov += seen as usize;
-            audit.caught += (seen && floored) as usize;
-            audit.false_floors += (floored && !seen) as usize;
+        }
+        let own = grid.cell_corners(coords);
+        let by_corner: HashSet<u32> = own.iter().flat_map(|c| &corner_seen[c]).copied().collect();
+        let around: HashSet<u32> = hood.iter().flat_map(|c| &corner_seen[c]).copied().collect();
+        let interior: Vec<HashSet<u32>> =
+            interior_points(&cell_box, dense).into_iter().map(&mut seen_from).collect::<Result<_>>()?;
+        let by_dense: HashSet<u32> = interior.iter().flatten().chain(&by_corner).copied().collect();
+        for audit in &mut audits {
+            let k = (audit.interior_samples as usize).min(interior.len());
+            let sparse: HashSet<u32> = interior[..k].iter().flatten().chain(&by_corner).copied().collect();
+            audit.cells += 1;
+            audit.sparse_visible += sparse.len();
+            for (object, bounds) in object_bounds.iter().enumerate() {
+                let object = object as u32;
+                if sparse.contains(&object) {
+                    continue;
+                }
+                let floored = match audit.test {
+                    FloorTest::BoxWithin(margin) => {
+                        let m = Vec3::splat(margin);
+                        !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
+                    }
+                    FloorTest::NeighbourCorners => around.contains(&object),
+                };
+                let seen = by_dense.contains(&object);
+                audit.zero_dov += seen as usize;
+                audit.caught += (seen && floored) as usize;
+                audit.false_floors += (floored && !seen) as usize;
+            }
         }
     }
-    Ok(audit)
+    Ok(audits)
 }

@@ -195,3 +195,35 @@ pub fn box_field(count: usize, seed: u64, rotated: bool) -> Scene {
 pub fn gpu_or_skip() -> bool {
     hdov::dov::gpu::adapter_or_skip()
 }
+
+/// A block of `n × n` buildings (boxes 14 × 14, heights 10..70, on a 20 pitch: streets 6 wide)
+/// on a ground slab (object 0). With `props`, the streets also get poles (0.3 × 4 × 0.3) and low
+/// walls (6 × 1.2 × 0.2) — the small objects that corner sampling tends to miss.
+pub fn city_block(n: u32, props: bool) -> Scene {
+    let mut b = SceneBuilder::default();
+    let extent = n as f32 * 20.0;
+    b.aabox(Vec3::new(-10.0, -1.0, -10.0), Vec3::new(extent + 10.0, 0.0, extent + 10.0));
+    for i in 0..n {
+        for j in 0..n {
+            let h = 10.0 + ((i * 7 + j * 13) % 13) as f32 * 5.0;
+            let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
+            b.aabox(Vec3::new(x, 0.0, z), Vec3::new(x + 14.0, h, z + 14.0));
+        }
+    }
+    if props {
+        let mut rng = Rng(99);
+        for i in 0..n {
+            for j in 0..n {
+                let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
+                // Poles along the street east of the building, walls along the one south of it.
+                let pz = z + rng.range(1.0, 13.0);
+                let px = x + 14.0 + rng.range(0.5, 5.2);
+                b.aabox(Vec3::new(px, 0.0, pz), Vec3::new(px + 0.3, 4.0, pz + 0.3));
+                let wx = x + rng.range(0.0, 8.0);
+                let wz = z + 14.0 + rng.range(0.5, 5.5);
+                b.aabox(Vec3::new(wx, 0.0, wz), Vec3::new(wx + 6.0, 1.2, wz + 0.2));
+            }
+        }
+    }
+    b.build()
+}
