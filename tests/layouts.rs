@@ -3,8 +3,8 @@
 
 use hdov::city::{CityParams, CityScale};
 use hdov::db::{self, BuildParams, Database, VisibilityParams};
+use hdov::dov::BackendKind;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::select::BackendChoice;
 use hdov::progress::Progress;
 use hdov::rtree::RTree;
 use hdov_storage::{LayoutKind, ReadMode};
@@ -24,11 +24,7 @@ fn fixture() -> Fixture {
     let dir = tmp.path().join("db");
     let params = BuildParams {
         page_size: 512,
-        visibility: Some(VisibilityParams {
-            resolution: RESOLUTION,
-            backend: BackendChoice::Cpu,
-            ..Default::default()
-        }),
+        visibility: Some(VisibilityParams { resolution: RESOLUTION, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
     db::build::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();

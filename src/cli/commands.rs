@@ -9,7 +9,7 @@ use super::args::{parse_dims, parse_region};
 use crate::city::{CityParams, CityScale};
 use crate::db::build::BuildReport;
 use crate::db::{self, BuildParams, Database, VisibilityParams};
-use crate::dov::select::BackendChoice;
+use crate::dov::BackendKind;
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
@@ -93,7 +93,7 @@ pub struct VisibilityArgs {
     samples: u32,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
     #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    backend: BackendKind,
     /// Compute only part I of N of the cells (join the parts with `hdov merge`).
     #[arg(long, value_parser = parse_shard)]
     shard: Option<[u32; 2]>,
@@ -153,7 +153,7 @@ pub struct DovArgs {
     #[arg(long, default_value_t = 256)]
     resolution: u32,
     #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    backend: BackendKind,
     #[arg(long)]
     json: bool,
 }
@@ -389,7 +389,7 @@ pub fn dov(a: DovArgs) -> Result<()> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    let mut backend = crate::dov::select::create_backend(a.backend, &scene, a.resolution)?;
+    let mut backend = crate::dov::open_backend(&scene, a.resolution, a.backend)?;
     let point = backend.measure(a.at)?;
     let mut objects: Vec<_> = point.objects.iter().map(|&(id, d)| (id, d)).collect();
     objects.sort_by(|x, y| y.1.total_cmp(&x.1));

@@ -9,8 +9,8 @@ use hdov_storage::{BlobWriter, DirTxn, PageFileWriter};
 use super::catalog::{Catalog, LodRef, ObjectRecord};
 use super::tree_page::{self, NodePage};
 use super::*;
+use crate::dov::open_backend;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
-use crate::dov::select::create_backend;
 use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
@@ -144,7 +144,7 @@ fn build_visibility(
     let kinds = v.layout_kinds()?;
     let codec = v.codec()?;
     let t = Instant::now();
-    let mut backend = create_backend(v.backend, scene, v.resolution)?;
+    let mut backend = open_backend(scene, v.resolution, v.backend)?;
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions { interior_samples: v.interior_samples, ..Default::default() };

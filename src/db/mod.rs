@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::dov::BackendKind;
 use crate::dov::precompute::Shard;
-use crate::dov::select::BackendChoice;
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::LodParams;
@@ -66,7 +66,7 @@ impl Default for BuildParams {
 pub struct VisibilityParams {
     /// Texels per cube-face edge (R).
     pub resolution: u32,
-    pub backend: BackendChoice,
+    pub backend: BackendKind,
     /// Stratified interior sample points per cell, besides the 8 shared corners.
     pub interior_samples: u32,
     /// Layouts to write: `horizontal`, `vertical`, `indexed-vertical`.
@@ -81,7 +81,7 @@ impl Default for VisibilityParams {
     fn default() -> Self {
         Self {
             resolution: 128,
-            backend: BackendChoice::Auto,
+            backend: BackendKind::Auto,
             interior_samples: 0,
             layouts: LayoutKind::ALL.iter().map(|k| k.name().to_string()).collect(),
             dov_codec: DovCodec::F32.to_string(),

@@ -11,7 +11,6 @@ pub mod cpu;
 pub mod cubemap;
 pub mod gpu;
 pub mod precompute;
-pub mod select;
 
 use std::collections::HashMap;
 
@@ -159,7 +158,8 @@ pub fn default_near(scene_bounds: &crate::geom::Aabb) -> f32 {
 }
 
 /// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum BackendKind {
     /// The GPU backend when an adapter exists, else the CPU backend.
     #[default]
@@ -185,6 +185,12 @@ impl std::str::FromStr for BackendKind {
 /// when no GPU adapter exists or the GPU backend cannot be set up (the reason is dropped: ask for
 /// `Gpu` explicitly to see it). Costs the backend's construction: a BVH build or an upload.
 pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendKind) -> Result<Box<dyn DovBackend>> {
+    if !(1..=4096).contains(&resolution) {
+        return Err(crate::Error::bad_arg(
+            "--resolution",
+            format!("{resolution} is outside 1..=4096 texels per face edge"),
+        ));
+    }
     match kind {
         BackendKind::Cpu => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
         BackendKind::Gpu => Ok(Box::new(GpuBackend::new(scene, resolution)?)),
