@@ -79,8 +79,10 @@ fn same_seed_same_city_other_seed_other_city() {
     let b = city(CityScale::Tiny, 43);
     assert_ne!(a.objects, b.objects);
     assert_ne!(a.meshes[1..], b.meshes[1..]);
+    // Buildings are generated in parallel: one thread must give the same city as many.
     let small = city(CityScale::Small, 7);
-    assert_eq!(small, city(CityScale::Small, 7));
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    assert_eq!(small, one_thread.install(|| city(CityScale::Small, 7)));
 }
 
 #[test]
@@ -113,9 +115,14 @@ fn object_counts_per_scale() {
 #[test]
 fn blocks_override_the_scale() {
     let one = generate(&CityParams { blocks: Some([1, 1]), ..CityParams::default() });
+    let zero = generate(&CityParams { blocks: Some([0, 0]), ..CityParams::default() });
+    assert_eq!(zero, one, "zero blocks count as one");
+    one.check().unwrap();
     let wide = generate(&CityParams { blocks: Some([6, 2]), scale: CityScale::Tiny, ..CityParams::default() });
     let tiny = city(CityScale::Tiny, 0);
-    assert!(one.objects.len() <= 6 + 1, "one block is a plaza: {} objects", one.objects.len());
+    let one_details = (0..one.objects.len()).filter(|&o| is_detail(&one, o)).count();
+    assert_eq!(one_details, 4, "a one-block city has statues at its four street corners");
+    assert!((4..=40).contains(&(one.objects.len() - one_details)), "{} buildings on one block", one.objects.len() - 4);
     assert!(wide.objects.len() > tiny.objects.len() * 2, "{} vs {}", wide.objects.len(), tiny.objects.len());
     let [w, d] = [wide.grid.unwrap().region.extent().x, wide.grid.unwrap().region.extent().z];
     assert!(w > d * 2.0, "6 x 2 blocks make a wide city: {w} x {d}");

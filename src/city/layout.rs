@@ -60,7 +60,8 @@ pub struct CityPlan {
     pub details: Vec<DetailSite>,
 }
 
-/// Lays out a city of `blocks` (along x, along z; each at least 1) for `seed`.
+/// Lays out a city of `blocks` (along x, along z; each at least 1) for `seed`. A city of one
+/// block has no plaza; its statues stand in the corner crossings of its ring street.
 pub fn plan_city(seed: u64, blocks: [u32; 2]) -> CityPlan {
     let blocks = blocks.map(|b| b.max(1));
     let mut streets = Rng::derive(seed, STREETS, 0);
@@ -86,7 +87,31 @@ pub fn plan_city(seed: u64, blocks: [u32; 2]) -> CityPlan {
             buildings.extend(lots.iter().map(|lot| site_on_lot(*lot, downtown, &mut rng)));
         }
     }
+    if details.is_empty() {
+        details = corner_details(
+            Rect::new(Vec2::new(columns.0[0].0, rows.0[0].0), Vec2::new(columns.0[0].1, rows.0[0].1)),
+            extent,
+            seed,
+        );
+    }
     CityPlan { extent, buildings, details }
+}
+
+/// Statues for a city too small for a plaza (one block): one in each corner crossing of the
+/// ring street around `block`.
+fn corner_details(block: Rect, extent: Vec2, seed: u64) -> Vec<DetailSite> {
+    let mut rng = Rng::derive(seed, PLAZAS, 1);
+    let xs = [block.min.x * 0.5, (block.max.x + extent.x) * 0.5];
+    let zs = [block.min.y * 0.5, (block.max.y + extent.y) * 0.5];
+    let corners = [Vec2::new(xs[0], zs[0]), Vec2::new(xs[1], zs[0]), Vec2::new(xs[1], zs[1]), Vec2::new(xs[0], zs[1])];
+    corners
+        .into_iter()
+        .map(|position| DetailSite {
+            position,
+            yaw: rng.range(0.0, std::f32::consts::TAU),
+            scale: rng.range(0.8, 1.25),
+        })
+        .collect()
 }
 
 /// The block intervals along one axis and the total length: streets of 10–16 m, an avenue of
@@ -110,11 +135,11 @@ fn street_grid(blocks: u32, rng: &mut Rng) -> (Vec<(f32, f32)>, f32) {
     (intervals, at)
 }
 
-/// Which blocks are plazas: `PLAZA_FRACTION` of them (at least one, and never every block of
-/// a city of more than one), picked by a partial Fisher–Yates shuffle.
+/// Which blocks are plazas: `PLAZA_FRACTION` of them, at least one, but none in a city of one
+/// block (its statues stand at the street corners instead), picked by a partial Fisher–Yates
+/// shuffle.
 fn choose_plazas(seed: u64, block_count: usize) -> Vec<bool> {
-    let wanted = ((block_count as f32 * PLAZA_FRACTION).round() as usize).max(1);
-    let wanted = if block_count > 1 { wanted.min(block_count - 1) } else { wanted };
+    let wanted = ((block_count as f32 * PLAZA_FRACTION).round() as usize).max(1).min(block_count - 1);
     let mut rng = Rng::derive(seed, PLAZAS, 0);
     let mut order: Vec<usize> = (0..block_count).collect();
     let mut plazas = vec![false; block_count];
@@ -219,7 +244,7 @@ mod tests {
 
     #[test]
     fn plazas_are_a_few_and_never_all() {
-        assert_eq!(choose_plazas(1, 1), vec![true]);
+        assert_eq!(choose_plazas(1, 1), vec![false]);
         assert_eq!(choose_plazas(1, 2).iter().filter(|p| **p).count(), 1);
         assert_eq!(choose_plazas(1, 729).iter().filter(|p| **p).count(), 51);
     }
