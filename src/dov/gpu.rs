@@ -51,6 +51,15 @@ pub fn adapter_available() -> Option<String> {
     Some(describe(&adapter.get_info()))
 }
 
+/// Whether the adapter the GPU backend would use is real graphics hardware rather than a CPU
+/// rasteriser (llvmpipe, lavapipe, WARP). On a CPU rasteriser the ray caster is faster for large
+/// scenes, so `--backend auto` takes the GPU backend only on hardware.
+pub fn hardware_adapter_available() -> bool {
+    let instance = new_instance();
+    pollster::block_on(instance.request_adapter(&adapter_options()))
+        .is_ok_and(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
+}
+
 /// For tests: `true` when a GPU test can run. Without an adapter it prints `skipped: no adapter`
 /// and returns `false`, unless [`REQUIRE_ADAPTER_ENV`] is `1`, in which case it panics (CI sets it
 /// after installing Mesa, so a missing driver cannot pass silently).

@@ -157,11 +157,13 @@ pub fn default_near(scene_bounds: &crate::geom::Aabb) -> f32 {
     if diag.is_finite() { (diag * 1e-4).max(1e-4) } else { 1e-4 }
 }
 
-/// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`).
+/// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`). `Auto` takes the GPU
+/// backend on graphics hardware and the CPU ray caster otherwise: on Mesa's CPU rasterisers the
+/// ray caster measures a city several times faster (docs/dov.md, speed).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BackendKind {
-    /// The GPU backend when an adapter exists, else the CPU backend.
+    /// The GPU backend on a hardware adapter, else the CPU backend.
     #[default]
     Auto,
     Gpu,
@@ -181,8 +183,8 @@ impl std::str::FromStr for BackendKind {
     }
 }
 
-/// Opens the backend `kind` for `scene` at `resolution`. `Auto` falls back to the CPU backend
-/// when no GPU adapter exists or the GPU backend cannot be set up (the reason is dropped: ask for
+/// Opens the backend `kind` for `scene` at `resolution`. `Auto` uses the CPU backend when no
+/// hardware adapter exists or the GPU backend cannot be set up (the reason is dropped: ask for
 /// `Gpu` explicitly to see it). Costs the backend's construction: a BVH build or an upload.
 pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendKind) -> Result<Box<dyn DovBackend>> {
     if !(1..=4096).contains(&resolution) {
@@ -194,6 +196,7 @@ pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendK
     match kind {
         BackendKind::Cpu => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
         BackendKind::Gpu => Ok(Box::new(GpuBackend::new(scene, resolution)?)),
+        BackendKind::Auto if !gpu::hardware_adapter_available() => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
         BackendKind::Auto => match GpuBackend::new(scene, resolution) {
             Ok(gpu) => Ok(Box::new(gpu)),
             Err(crate::Error::Gpu(_)) => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
