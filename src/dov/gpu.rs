@@ -137,6 +137,10 @@ impl GpuBackend {
         }))
         .map_err(|e| Error::Gpu(format!("{adapter_name}: no device: {e}")))?;
 
+        // Validation and out-of-memory errors become `Error::Gpu` instead of wgpu's default panic.
+        // (Scopes pop in reverse order; an early return drops them in reverse order too.)
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out_of_memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let origin = scene.bounds().center();
         let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
         let geometry = Geometry::build(scene, origin)?;
@@ -234,6 +238,11 @@ impl GpuBackend {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        for scope in [out_of_memory, validation] {
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(Error::Gpu(format!("{adapter_name}: setting up: {e}")));
+            }
+        }
         Ok(Self {
             cube: CubeMap::new(resolution),
             near,
@@ -421,6 +430,7 @@ impl DovBackend for GpuBackend {
         let r = self.cube.resolution();
         check_cube(out, r)?;
         let eye = p - self.origin;
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
                 clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
@@ -485,6 +495,9 @@ impl DovBackend for GpuBackend {
             );
         }
         self.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(validation.pop()) {
+            return Err(Error::Gpu(format!("{}: rendering: {e}", self.adapter_name)));
+        }
         self.read_back(out)
     }
 }
