@@ -1,9 +1,9 @@
 //! The GPU backend: wgpu rasterisation of the id cube map.
 //!
 //! All geometry is uploaded once, in world space relative to the scene's centre (f32 precision
-//! stays near the geometry), one vertex = position + object id. Objects lie in the index buffer in
+//! stays near the geometry), one vertex = position + object id. Objects lie in the vertex buffer in
 //! *descending* id order, so that (a) the objects that survive a face's frustum test form a few
-//! contiguous index ranges, one draw each, and (b) with a `GreaterEqual` reverse-Z depth test,
+//! contiguous vertex ranges, one draw each, and (b) with a `GreaterEqual` reverse-Z depth test,
 //! the later-drawn lower id wins an exact depth tie — the CPU backend's tie rule.
 //!
 //! Each face is rendered into its own R32Uint 2D texture (copying 2D-array layers to a buffer
@@ -105,8 +105,7 @@ pub struct GpuBackend {
     uniforms: wgpu::Buffer,
     face_bind_groups: Vec<wgpu::BindGroup>,
     vertices: Option<wgpu::Buffer>,
-    indices: Option<wgpu::Buffer>,
-    /// Index range of each object in the index buffer, in draw (descending id) order.
+    /// Vertex range of each object in the vertex buffer, in draw (descending id) order.
     draw_ranges: Vec<std::ops::Range<u32>>,
     /// Bounds of each object in draw order, relative to `origin`.
     draw_bounds: Vec<Aabb>,
@@ -146,12 +145,16 @@ impl GpuBackend {
         }))
         .map_err(|e| Error::Gpu(format!("{adapter_name}: no device: {e}")))?;
 
+        // Validation and out-of-memory errors become `Error::Gpu` instead of wgpu's default panic.
+        // (Scopes pop in reverse order; an early return drops them in reverse order too.)
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out_of_memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let origin = scene.bounds().center();
         let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
         let geometry = Geometry::build(scene, origin)?;
         let max_buffer = limits.max_buffer_size;
         let vertex_bytes = (geometry.vertices.len() * std::mem::size_of::<Vertex>()) as u64;
-        if vertex_bytes > max_buffer || (geometry.indices.len() * 4) as u64 > max_buffer {
+        if vertex_bytes > max_buffer {
             return Err(Error::Gpu(format!(
                 "{adapter_name}: the scene's {vertex_bytes} vertex bytes exceed the buffer limit {max_buffer}"
             )));
@@ -161,13 +164,6 @@ impl GpuBackend {
                 label: Some("dov vertices"),
                 contents: bytemuck::cast_slice(&geometry.vertices),
                 usage: wgpu::BufferUsages::VERTEX,
-            })
-        });
-        let indices = (!geometry.indices.is_empty()).then(|| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("dov indices"),
-                contents: bytemuck::cast_slice(&geometry.indices),
-                usage: wgpu::BufferUsages::INDEX,
             })
         });
 
@@ -243,6 +239,11 @@ impl GpuBackend {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        for scope in [out_of_memory, validation] {
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(Error::Gpu(format!("{adapter_name}: setting up: {e}")));
+            }
+        }
         Ok(Self {
             cube: CubeMap::new(resolution),
             near,
@@ -253,7 +254,6 @@ impl GpuBackend {
             uniforms,
             face_bind_groups,
             vertices,
-            indices,
             draw_ranges: geometry.draw_ranges,
             draw_bounds: geometry.draw_bounds,
             origin,
@@ -273,7 +273,7 @@ impl GpuBackend {
         self.near
     }
 
-    /// Index ranges to draw for one face: objects whose box may reach into the face's frustum,
+    /// Vertex ranges to draw for one face: objects whose box may reach into the face's frustum,
     /// consecutive ones merged. Conservative: a box is dropped only when it lies wholly outside
     /// one of the frustum's planes (or wholly nearer than the near plane).
     fn visible_ranges(&self, face: usize, eye: Vec3) -> Vec<std::ops::Range<u32>> {
@@ -303,10 +303,10 @@ impl GpuBackend {
     }
 }
 
-/// The scene as one vertex and one index buffer, objects in descending id order.
+/// The scene as one vertex buffer (three vertices per triangle, no sharing: every object is its
+/// own world-space copy), objects in descending id order.
 struct Geometry {
     vertices: Vec<Vertex>,
-    indices: Vec<u32>,
     draw_ranges: Vec<std::ops::Range<u32>>,
     draw_bounds: Vec<Aabb>,
 }
@@ -339,12 +339,9 @@ impl Geometry {
             draw_bounds.push(bounds);
         }
         if vertices.len() > u32::MAX as usize {
-            return Err(Error::Gpu(format!("{} vertices exceed u32 indices", vertices.len())));
+            return Err(Error::Gpu(format!("{} vertices exceed u32 vertex indices", vertices.len())));
         }
-        // Triangles are unshared (each object's world copy), so the index buffer is the identity;
-        // it exists so that draws are index ranges and a later LOD-aware drawing can share vertices.
-        let indices = (0..vertices.len() as u32).collect();
-        Ok(Self { vertices, indices, draw_ranges, draw_bounds })
+        Ok(Self { vertices, draw_ranges, draw_bounds })
     }
 }
 
@@ -430,6 +427,7 @@ impl DovBackend for GpuBackend {
         let r = self.cube.resolution();
         check_cube(out, r)?;
         let eye = p - self.origin;
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
                 clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
@@ -462,15 +460,14 @@ impl DovBackend for GpuBackend {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            if let (Some(vertices), Some(indices)) = (&self.vertices, &self.indices)
+            if let Some(vertices) = &self.vertices
                 && !ranges.is_empty()
             {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.face_bind_groups[face], &[]);
                 pass.set_vertex_buffer(0, vertices.slice(..));
-                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
                 for range in ranges {
-                    pass.draw_indexed(range, 0, 0..1);
+                    pass.draw(range, 0..1);
                 }
             }
         }
@@ -494,6 +491,9 @@ impl DovBackend for GpuBackend {
             );
         }
         self.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(validation.pop()) {
+            return Err(Error::Gpu(format!("{}: rendering: {e}", self.adapter_name)));
+        }
         self.read_back(out)
     }
 }
