@@ -131,8 +131,7 @@ pub fn aggregate_chain(parts: &[Mesh], params: &LodParams) -> Vec<LodLevel> {
     let total = merged.triangle_count();
     let mut chain: Vec<LodLevel> = Vec::new();
     let mut target = ((total as f32 * params.ratio) as usize).clamp(1, total.saturating_sub(1).max(1));
-    loop {
-        let Some(level) = simplify(&merged, target, true) else { break };
+    while let Some(level) = simplify(&merged, target, true) {
         let prev = chain.last().map_or(total, |l| l.faces());
         if !chain.is_empty() && level.faces() as f32 > prev as f32 * (1.0 - MIN_REDUCTION) {
             break;

@@ -95,7 +95,8 @@ fn damaged_files_are_refused_with_a_clear_error() {
     let dir = tmp.path().join("db");
     build(&dir, &BuildParams { page_size: 256, ..Default::default() });
     open_and_read_all(&dir).unwrap();
-    let cases: Vec<(&str, Box<dyn FnOnce(&mut Vec<u8>)>, &str)> = vec![
+    type Damage = Box<dyn FnOnce(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Damage, &str)> = vec![
         ("tree.pages", Box::new(|b| b[700] ^= 1), "checksum"),
         ("tree.pages", Box::new(|b| b.truncate(b.len() - 100)), "truncated"),
         ("tree.pages", Box::new(|b| b[0] = b'X'), "magic"),

@@ -349,24 +349,38 @@ pub fn info(a: InfoArgs) -> Result<()> {
     Ok(())
 }
 
+/// Resolution of the demo's DoV measurement: fine enough for the city's sphere-of-directions
+/// floor (1.9e-5) and measured in about a minute on 2 CPU cores.
+const DEMO_RESOLUTION: u32 = 128;
+
 pub fn demo(a: DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
     let scene_path = generate_city(&a.out, 1, CityScale::Default, None, None)?;
     let (scene, _) = Scene::load(&scene_path)?;
     let db_path = a.out.join("city.hdov");
-    let report = db::build::build(&scene, &db_path, &BuildParams::default(), true, &Progress::for_terminal(a.json))?;
-    if a.json {
+    let params = BuildParams {
+        visibility: Some(VisibilityParams { resolution: DEMO_RESOLUTION, ..Default::default() }),
+        ..Default::default()
+    };
+    if !a.json {
+        let g = scene.grid.expect("the city brings its grid");
         println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()})
-            )
-            .expect("serialisable")
+            "demo: default city ({} objects), grid {}x{}x{} = {} cells, DoV at R = {DEMO_RESOLUTION}",
+            scene.objects.len(),
+            g.dims[0],
+            g.dims[1],
+            g.dims[2],
+            g.cell_count()
         );
+    }
+    let report = db::build::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
+    if a.json {
+        let doc = json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()});
+        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
     } else {
         println!("scene: {}", scene_path.display());
         print_build(&db_path, &report);
-        println!("demo finished in {:.1} s", t.elapsed().as_secs_f64());
+        println!("demo finished in {:.1} s; next: hdov info {}", t.elapsed().as_secs_f64(), db_path.display());
     }
     Ok(())
 }

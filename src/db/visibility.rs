@@ -56,11 +56,11 @@ pub fn vdata_from_cells(tree: &RTree, cell_count: u32, cells: &[(u32, CellDov)])
     data
 }
 
+/// The visible V-pages of one cell: (node id, V-entries), ascending node id.
+pub type CellVPages = Vec<(u32, Vec<VEntry>)>;
+
 /// Reads the V-pages of `cells` back from a layout (for merging shard databases).
-pub fn read_cells(
-    reader: &mut LayoutReader,
-    cells: std::ops::Range<u32>,
-) -> Result<Vec<(u32, Vec<(u32, Vec<VEntry>)>)>> {
+pub fn read_cells(reader: &mut LayoutReader, cells: std::ops::Range<u32>) -> Result<Vec<(u32, CellVPages)>> {
     let mut out = Vec::with_capacity(cells.len());
     for cell in cells {
         reader.flip_to_cell(cell)?;

@@ -46,18 +46,14 @@ struct FaceUniform {
 /// The name of the adapter the GPU backend would use (e.g. "llvmpipe (LLVM 19.1.7, 256 bits) on
 /// Gl"), or `None` when wgpu finds none. Costs an instance and an adapter request.
 pub fn adapter_available() -> Option<String> {
-    let instance = new_instance();
-    let adapter = pollster::block_on(instance.request_adapter(&adapter_options())).ok()?;
-    Some(describe(&adapter.get_info()))
+    request_adapter().ok().map(|a| describe(&a.get_info()))
 }
 
 /// Whether the adapter the GPU backend would use is real graphics hardware rather than a CPU
 /// rasteriser (llvmpipe, lavapipe, WARP). On a CPU rasteriser the ray caster is faster for large
 /// scenes, so `--backend auto` takes the GPU backend only on hardware.
 pub fn hardware_adapter_available() -> bool {
-    let instance = new_instance();
-    pollster::block_on(instance.request_adapter(&adapter_options()))
-        .is_ok_and(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
+    request_adapter().is_ok_and(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
 }
 
 /// For tests: `true` when a GPU test can run. Without an adapter it prints `skipped: no adapter`
@@ -74,9 +70,21 @@ pub fn adapter_or_skip() -> bool {
     false
 }
 
-fn new_instance() -> wgpu::Instance {
-    // WGPU_BACKEND etc. may pick a backend (e.g. WGPU_BACKEND=gl to force llvmpipe through EGL).
-    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle().with_env())
+/// The adapter the GPU backend uses. `WGPU_BACKEND` (e.g. `gl`, `vulkan`) picks the backend;
+/// otherwise the native APIs (Vulkan, Metal, DX12) are asked first and GL only when they offer
+/// nothing, which also keeps EGL from probing (and complaining about) display servers needlessly.
+fn request_adapter() -> std::result::Result<wgpu::Adapter, wgpu::RequestAdapterError> {
+    let request = |backends: Option<wgpu::Backends>| {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle().with_env();
+        if let Some(b) = backends {
+            desc.backends = b;
+        }
+        pollster::block_on(wgpu::Instance::new(desc).request_adapter(&adapter_options()))
+    };
+    if std::env::var_os("WGPU_BACKEND").is_some() {
+        return request(None);
+    }
+    request(Some(wgpu::Backends::PRIMARY)).or_else(|_| request(Some(wgpu::Backends::GL)))
 }
 
 fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {
@@ -127,9 +135,7 @@ impl GpuBackend {
     /// As [`GpuBackend::new`] with an explicit near distance along each face's forward axis.
     pub fn with_near(scene: &Scene, resolution: u32, near: f32) -> Result<Self> {
         check_resolution_and_near(resolution, near)?;
-        let instance = new_instance();
-        let adapter = pollster::block_on(instance.request_adapter(&adapter_options()))
-            .map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
+        let adapter = request_adapter().map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
         let adapter_name = describe(&adapter.get_info());
         let limits = adapter.limits();
         if resolution > limits.max_texture_dimension_2d {
