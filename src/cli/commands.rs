@@ -103,6 +103,10 @@ pub struct VisibilityArgs {
     /// How V-entries store DoV: f32, or log-u16 (smaller; error bound in docs/storage-format.md).
     #[arg(long, default_value = "f32")]
     dov_codec: DovCodec,
+    /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
+    /// neighbours (a neighbouring cell's corner sees it), or none.
+    #[arg(long, default_value = "box,neighbours", value_delimiter = ',')]
+    zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
     #[arg(long)]
     no_visibility: bool,
@@ -117,6 +121,7 @@ impl VisibilityArgs {
             layouts: self.layouts.iter().map(|k| k.name().to_string()).collect(),
             dov_codec: self.dov_codec.to_string(),
             shard: self.shard,
+            zero_dov_floor: self.zero_dov_floor.iter().filter(|t| t.as_str() != "none").cloned().collect(),
         })
     }
 }

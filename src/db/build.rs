@@ -69,6 +69,8 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     geometry.finish()?;
+    // The meshes are on disk now; the DoV stage needs the memory more.
+    drop(lods);
 
     let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, params.page_size)?;
     let objects_under = tree.subtree_object_counts();
@@ -147,7 +149,11 @@ fn build_visibility(
     let mut backend = open_backend(scene, v.resolution, v.backend)?;
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
-    let options = PrecomputeOptions { interior_samples: v.interior_samples, ..Default::default() };
+    let options = PrecomputeOptions {
+        interior_samples: v.interior_samples,
+        zero_dov_tests: v.floor_tests()?,
+        ..Default::default()
+    };
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(
         backend.as_mut(),

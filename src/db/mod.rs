@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::dov::BackendKind;
-use crate::dov::precompute::Shard;
+use crate::dov::precompute::{FloorTest, Shard};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::LodParams;
@@ -75,6 +75,11 @@ pub struct VisibilityParams {
     pub dov_codec: String,
     /// `[I, N]`: this database holds part I of N of the grid's cells.
     pub shard: Option<[u32; 2]>,
+    /// Visible-zero-DoV tests (thesis §5.5.2) that give unseen objects the one-texel floor:
+    /// `box` (the object's box meets the cell), `neighbours` (a neighbouring cell's corner sees
+    /// it). Empty: no floor.
+    #[serde(default)]
+    pub zero_dov_floor: Vec<String>,
 }
 
 impl Default for VisibilityParams {
@@ -86,6 +91,7 @@ impl Default for VisibilityParams {
             layouts: LayoutKind::ALL.iter().map(|k| k.name().to_string()).collect(),
             dov_codec: DovCodec::F32.to_string(),
             shard: None,
+            zero_dov_floor: vec!["box".into(), "neighbours".into()],
         }
     }
 }
@@ -97,6 +103,17 @@ impl VisibilityParams {
 
     pub fn codec(&self) -> Result<DovCodec> {
         self.dov_codec.parse().map_err(|e: String| Error::bad_arg("--dov-codec", e))
+    }
+
+    pub fn floor_tests(&self) -> Result<Vec<FloorTest>> {
+        self.zero_dov_floor
+            .iter()
+            .map(|t| match t.as_str() {
+                "box" => Ok(FloorTest::BoxWithin(0.0)),
+                "neighbours" => Ok(FloorTest::NeighbourCorners),
+                _ => Err(Error::bad_arg("--zero-dov-floor", format!("unknown test '{t}' (box, neighbours)"))),
+            })
+            .collect()
     }
 
     pub fn shard(&self) -> Shard {
