@@ -1,0 +1,76 @@
+//! DoV measurement speed and backend agreement on the default city.
+//!
+//! For each resolution, measures the same street sample points with the CPU ray caster and the
+//! wgpu backend, and prints one CSV row per (backend, R): seconds per sample point, sample points
+//! per second, seconds per cell (a corners-only grid measures `corners / cells` points per cell),
+//! and the per-object agreement of the two backends at those points.
+//!
+//! `cargo run --release -p hdov-tools --bin dov-speed -- [POINTS] [R,R,..] > docs/data/dov_speed.csv`
+
+use std::time::Instant;
+
+use hdov::city::{CityParams, CityScale};
+use hdov::dov::{CpuBackend, DovBackend, GpuBackend, PointDov};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let points: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(24);
+    let resolutions: Vec<u32> =
+        args.next().unwrap_or_else(|| "128,256,512".into()).split(',').map(str::parse).collect::<Result<_, _>>()?;
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
+    let grid = scene.grid.expect("the city brings a grid");
+    let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
+    // Corners spread over the grid: a deterministic stride through the corner ids.
+    let stride = (grid.corner_count() / points).max(1);
+    let at: Vec<_> = (0..points).map(|i| grid.corner_position(grid.corner_coords((i * stride + 7) % grid.corner_count()))).collect();
+    println!("backend,adapter,resolution,points,setup_s,s_per_point,points_per_s,s_per_cell,max_abs_diff,mean_abs_diff,objects_compared");
+    for &r in &resolutions {
+        let t = Instant::now();
+        let mut cpu = CpuBackend::new(&scene, r)?;
+        let cpu_setup = t.elapsed().as_secs_f64();
+        let (cpu_s, cpu_dov) = measure_all(&mut cpu, &at)?;
+        let mut rows = vec![("cpu", cpu.name(), cpu_setup, cpu_s, None)];
+        let t = Instant::now();
+        if let Ok(mut gpu) = GpuBackend::new(&scene, r) {
+            // Setup includes the upload and a first, untimed measurement (pipeline warm-up).
+            gpu.measure(at[0])?;
+            let setup = t.elapsed().as_secs_f64();
+            let (gpu_s, gpu_dov) = measure_all(&mut gpu, &at)?;
+            rows.push(("gpu", gpu.name(), setup, gpu_s, Some(agreement(&cpu_dov, &gpu_dov))));
+        }
+        for (backend, adapter, setup, secs, agree) in rows {
+            let per_point = secs / at.len() as f64;
+            let (max, mean, n) = agree.unwrap_or((0.0, 0.0, 0));
+            println!(
+                "{backend},\"{adapter}\",{r},{},{setup:.3},{per_point:.5},{:.2},{:.5},{max:.3e},{mean:.3e},{n}",
+                at.len(),
+                1.0 / per_point,
+                per_point * points_per_cell
+            );
+        }
+    }
+    Ok(())
+}
+
+fn measure_all(b: &mut dyn DovBackend, at: &[glam::Vec3]) -> hdov::Result<(f64, Vec<PointDov>)> {
+    let t = Instant::now();
+    let out = at.iter().map(|&p| b.measure(p)).collect::<hdov::Result<Vec<_>>>()?;
+    Ok((t.elapsed().as_secs_f64(), out))
+}
+
+/// Max and mean |ΔDoV| over every object either backend sees, and how many that is.
+fn agreement(a: &[PointDov], b: &[PointDov]) -> (f64, f64, usize) {
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0);
+    for (x, y) in a.iter().zip(b) {
+        let mut ids: Vec<u32> = x.objects.iter().chain(&y.objects).map(|o| o.0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        for id in ids {
+            let d = (x.get(id) - y.get(id)).abs();
+            max = max.max(d);
+            sum += d;
+            n += 1;
+        }
+    }
+    (max, sum / n.max(1) as f64, n)
+}
