@@ -288,6 +288,8 @@ pub fn info(a: InfoArgs) -> Result<()> {
                 "index_bytes": sizes.map(|l| l.index_bytes),
                 "dov_codec": s.dov.to_string(),
                 "visible_nodes_per_cell": {"mean": s.visible_nodes_mean, "max": s.visible_nodes_max},
+                // Storage cost per visible (node, cell) pair: what each layout pays for visibility.
+                "bytes_per_visible_vpage": s.bytes as f64 / (s.visible_nodes_mean * s.cell_count as f64).max(1.0),
                 "flip_pages": {"mean": s.flip_pages_mean, "max": s.flip_pages_max},
             }),
         );
