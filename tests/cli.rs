@@ -171,3 +171,47 @@ fn real_multi_part_obj_files_import_one_object_per_group() {
         assert_refused(&hdov(&["build", obj.to_str().unwrap(), "--out", tmp.path().join("x").to_str().unwrap()]), bad);
     }
 }
+
+/// Shards built separately and merged equal one whole build, file for file; a wrong set of
+/// shards is refused.
+#[test]
+fn shards_merge_into_the_whole_database() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--seed", "4", "--out", &s("city")]).status.success());
+    let scene = s("city/city.json");
+    let common = ["--resolution", "16", "--backend", "cpu", "--page-size", "1024"];
+    let build = |out: &str, extra: &[&str]| {
+        let mut args = vec!["build", scene.as_str(), "--out", out];
+        args.extend_from_slice(&common);
+        args.extend_from_slice(extra);
+        let o = hdov(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    build(&s("whole"), &[]);
+    for i in 0..3 {
+        build(&s(&format!("shard{i}")), &["--shard", &format!("{i}/3")]);
+    }
+    let o = hdov(&["merge", &s("shard0"), &s("shard2"), &s("shard1"), "--out", &s("merged")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "tree.pages",
+        "vpages.horizontal",
+        "vindex.vertical",
+        "vpages.vertical",
+        "vindex.indexed-vertical",
+        "vpages.indexed-vertical",
+    ] {
+        let (a, b) = (
+            std::fs::read(tmp.path().join("whole").join(f)).unwrap(),
+            std::fs::read(tmp.path().join("merged").join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs between the merged and the whole build");
+    }
+    assert_refused(&hdov(&["merge", &s("shard0"), &s("shard1"), "--out", &s("m2")]), "shard 2/3 is missing");
+    assert_refused(&hdov(&["merge", &s("shard0"), &s("shard0"), &s("shard1"), "--out", &s("m3")]), "as is");
+    assert_refused(&hdov(&["merge", &s("whole"), "--out", &s("m4")]), "not a shard");
+    build(&s("other"), &["--shard", "1/3", "--zero-dov-floor", "none"]);
+    assert_refused(&hdov(&["merge", &s("shard0"), &s("other"), &s("shard2"), "--out", &s("m5")]), "other parameters");
+    assert!(!tmp.path().join("m2").exists() && !tmp.path().join("m5").exists());
+}

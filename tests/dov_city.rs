@@ -11,9 +11,17 @@ const R: u32 = 48;
 fn run(backend: &mut dyn DovBackend, scene: &hdov::scene::Scene, shape: &TreeShape) -> Vec<(u32, CellDov)> {
     let grid = scene.grid.unwrap();
     let opts = PrecomputeOptions::default();
-    precompute_shard(backend, &grid, &scene.all_object_bounds(), shape, &opts, Shard { index: 1, count: 3 }, &mut |_, _| {})
-        .unwrap()
-        .cells
+    precompute_shard(
+        backend,
+        &grid,
+        &scene.all_object_bounds(),
+        shape,
+        &opts,
+        Shard { index: 1, count: 3 },
+        &mut |_, _| {},
+    )
+    .unwrap()
+    .cells
 }
 
 #[test]
@@ -23,7 +31,8 @@ fn cpu_and_gpu_give_the_same_cell_dov_on_a_city() {
     }
     let scene = hdov::city::generate(&CityParams { seed: 5, scale: CityScale::Tiny, ..Default::default() });
     let tree = RTree::build(&scene.all_object_bounds(), 8, TreeAlgorithm::Str);
-    let shape = TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+    let shape =
+        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let cpu = run(&mut CpuBackend::new(&scene, R).unwrap(), &scene, &shape);
     let gpu = run(&mut GpuBackend::new(&scene, R).unwrap(), &scene, &shape);
     assert_eq!(cpu.len(), gpu.len());

@@ -22,8 +22,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
     // Corners spread over the grid: a deterministic stride through the corner ids.
     let stride = (grid.corner_count() / points).max(1);
-    let at: Vec<_> = (0..points).map(|i| grid.corner_position(grid.corner_coords((i * stride + 7) % grid.corner_count()))).collect();
-    println!("backend,adapter,resolution,points,setup_s,s_per_point,points_per_s,s_per_cell,max_abs_diff,mean_abs_diff,objects_compared");
+    let at: Vec<_> =
+        (0..points).map(|i| grid.corner_position(grid.corner_coords((i * stride + 7) % grid.corner_count()))).collect();
+    println!(
+        "backend,adapter,resolution,points,setup_s,s_per_point,points_per_s,s_per_cell,max_abs_diff,mean_abs_diff,objects_compared"
+    );
     for &r in &resolutions {
         let t = Instant::now();
         let mut cpu = CpuBackend::new(&scene, r)?;
