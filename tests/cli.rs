@@ -215,3 +215,34 @@ fn shards_merge_into_the_whole_database() {
     assert_refused(&hdov(&["merge", &s("shard0"), &s("other"), &s("shard2"), "--out", &s("m5")]), "other parameters");
     assert!(!tmp.path().join("m2").exists() && !tmp.path().join("m5").exists());
 }
+
+/// `--detail-model` instances a real mesh (here a two-group OBJ, merged into one model).
+#[test]
+fn detail_model_from_an_obj_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let obj = tmp.path().join("statue.obj");
+    let mut text = String::from("o body\n");
+    // An octahedron (8 faces) and a separate box-ish quad pair (2 faces) in a second group.
+    for v in ["0 1 0", "1 0 0", "0 0 1", "-1 0 0", "0 0 -1", "0 -1 0"] {
+        text += &format!("v {v}\n");
+    }
+    text += "f 1 2 3\nf 1 3 4\nf 1 4 5\nf 1 5 2\nf 6 3 2\nf 6 4 3\nf 6 5 4\nf 6 2 5\n";
+    text += "o base\nv -1 -1 -1\nv 1 -1 -1\nv 1 -1 1\nv -1 -1 1\nf 7 8 9 10\n";
+    std::fs::write(&obj, text).unwrap();
+    let out = tmp.path().join("city");
+    let o = hdov(&[
+        "generate",
+        "city",
+        "--scale",
+        "tiny",
+        "--detail-model",
+        obj.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (scene, _) = hdov::scene::Scene::load(&out.join("city.json")).unwrap();
+    assert_eq!(scene.meshes[0].mesh.triangle_count(), 10, "both groups of the model, merged");
+    let statues = scene.objects.iter().filter(|o| o.mesh == 0).count();
+    assert!(statues > 1, "the model is instanced ({statues} instances)");
+}
