@@ -39,7 +39,7 @@ pub(crate) fn write_cell_vpages(w: &WriteCtx<'_>, path: &Path, tag: [u8; 4]) -> 
                 continue;
             }
             buf.clear();
-            w.codec.encode(entries, &mut buf);
+            w.encode_vpage(entries, &mut buf);
             a.push((*node, p.put(&buf)?));
         }
         addrs.push(a);
@@ -62,6 +62,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let meta = Meta {
         kind: LayoutKind::Vertical,
         codec: w.codec,
+        sparse: w.sparse,
         cell_count: data.cell_count,
         node_count: nodes as u32,
         data_start,
