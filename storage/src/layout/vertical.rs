@@ -4,7 +4,9 @@
 //!
 //! Files: `vindex.vertical` = metadata, then the C segments as equal-size slots (6·N_node
 //! bytes each: u32 page + u16 offset per node, nil = 0xFFFFFFFF/0xFFFF), slot `c` found by
-//! arithmetic; `vpages.vertical` = the visible V-pages, cell by cell, dfs order within a cell.
+//! arithmetic; `vpages.vertical` = the visible V-pages, cell by cell, dfs order within a cell,
+//! each dense or, with sparse encoding on, as the shorter of the two forms of
+//! [`SparseCodec`](crate::vpage::SparseCodec).
 
 use std::path::Path;
 
