@@ -189,7 +189,11 @@ pub(crate) fn write_layouts(
     page_size: u32,
     codec: hdov_storage::DovCodec,
 ) -> Result<Vec<LayoutInfo>> {
-    let opts = LayoutOptions { page_size: page_size.min(hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE), dov: codec };
+    let opts = LayoutOptions {
+        page_size: page_size.min(hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE),
+        dov: codec,
+        ..Default::default()
+    };
     kinds
         .iter()
         .map(|&kind| {

@@ -6,7 +6,7 @@
 use std::fs;
 use std::path::PathBuf;
 
-use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
+use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
 use hdov_storage::{BlobWriter, DovCodec, LayoutKind, LayoutOptions, PageFileWriter, write_layout};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -31,12 +31,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     w.finish()?;
     fs::copy(&b, out.join("blob/three-records"))?;
 
-    let data = synthetic_vdata(&SyntheticSpec { cells: 3, fanout: 4, levels: 2, reach: 0.5, ..Default::default() });
+    // Dense V-pages (the street model at fan-out 4 sees most entries), sparse ones with u8
+    // indices (fan-out 20, 10 % of entries) and with u16 indices (fan-out 300).
+    let sets = [
+        ("", synthetic_vdata(&SyntheticSpec { cells: 3, fanout: 4, levels: 2, reach: 0.5, ..Default::default() })),
+        ("-sparse", sparse_vdata(3, 20, 2, 0.1, 1)),
+        ("-sparse-u16", sparse_vdata(2, 300, 2, 0.01, 1)),
+    ];
     for (i, kind) in LayoutKind::ALL.into_iter().enumerate() {
-        for dov in [DovCodec::F32, DovCodec::LogU16] {
-            let dir = tmp.path().join(format!("{kind}-{dov}"));
+        for ((name, data), dov) in sets.iter().flat_map(|s| [(s, DovCodec::F32), (s, DovCodec::LogU16)]) {
+            if !name.is_empty() && kind == LayoutKind::Horizontal {
+                continue;
+            }
+            let dir = tmp.path().join(format!("{kind}-{dov}{name}"));
             fs::create_dir(&dir)?;
-            write_layout(&dir, kind, &data, &LayoutOptions { page_size: 64, dov })?;
+            write_layout(&dir, kind, data, &LayoutOptions { page_size: 64, dov, ..Default::default() })?;
             let files: Vec<Vec<u8>> =
                 kind.file_names().iter().map(|f| fs::read(dir.join(f))).collect::<Result<_, _>>()?;
             // The layout target's format: selector byte, u32 split, first file, second file.
@@ -46,7 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for f in &files {
                 input.extend_from_slice(f);
             }
-            fs::write(out.join(format!("layout/{kind}-{dov}")), input)?;
+            fs::write(out.join(format!("layout/{kind}-{dov}{name}")), input)?;
         }
     }
     Ok(())

@@ -92,3 +92,55 @@ pub fn synthetic_vdata(spec: &SyntheticSpec) -> VData {
     }
     VData { cell_count: spec.cells, node_fanout, cells }
 }
+
+/// Sparse V-data: a complete tree of fan-out `fanout` and `levels` levels, seen from `cells`
+/// cells; in each visible node each entry is visible with probability `entry_share` (at least
+/// one entry per visible node), and a child node is visible exactly when its entry in the
+/// parent is. The root is visible from every cell. Models the V-pages of real trees, whose
+/// visible nodes see few of their entries (a city street sees a handful of a node's 126).
+pub fn sparse_vdata(cells: u32, fanout: u16, levels: u32, entry_share: f64, seed: u64) -> VData {
+    let m = usize::from(fanout.max(1));
+    let levels = levels.max(1);
+    // Nodes in dfs order: per node, its level and its children's dfs numbers.
+    let mut children: Vec<Vec<u32>> = Vec::new();
+    fn dfs(level: u32, m: usize, levels: u32, children: &mut Vec<Vec<u32>>) -> u32 {
+        let me = children.len();
+        children.push(Vec::new());
+        if level + 1 < levels {
+            let kids: Vec<u32> = (0..m).map(|_| dfs(level + 1, m, levels, children)).collect();
+            children[me] = kids;
+        }
+        me as u32
+    }
+    dfs(0, m, levels, &mut children);
+    let node_fanout = vec![m as u16; children.len()];
+    let cells_data = (0..cells)
+        .map(|c| {
+            let mut visible = vec![false; children.len()];
+            visible[0] = true;
+            let mut cell = Vec::new();
+            for n in 0..children.len() {
+                if !visible[n] {
+                    continue;
+                }
+                let h = |i: usize| mix(seed ^ mix((u64::from(c) << 40) ^ ((n as u64) << 12) ^ i as u64));
+                let forced = (h(usize::MAX >> 1) % m as u64) as usize;
+                let entries: Vec<VEntry> = (0..m)
+                    .map(|i| {
+                        if i != forced && unit(h(i)) >= entry_share {
+                            return VEntry::default();
+                        }
+                        if let Some(&kid) = children[n].get(i) {
+                            visible[kid as usize] = true;
+                        }
+                        let dov = (1e-5_f64 * 1e4_f64.powf(unit(mix(h(i))))) as f32;
+                        VEntry { dov, nvo: 1 + (mix(h(i) ^ 1) % 50) as u32 }
+                    })
+                    .collect();
+                cell.push((n as u32, entries));
+            }
+            cell
+        })
+        .collect();
+    VData { cell_count: cells, node_fanout, cells: cells_data }
+}

@@ -226,19 +226,117 @@ impl VPageCodec {
     /// Decodes `bytes` (a whole number of entries) into `out` (cleared first).
     pub(crate) fn decode(&self, bytes: &[u8], out: &mut Vec<VEntry>) {
         out.clear();
-        let size = self.entry_bytes();
-        out.extend(bytes.chunks_exact(size).map(|b| {
-            let (dov, rest) = match self.dov {
-                DovCodec::F32 => (f32::from_le_bytes([b[0], b[1], b[2], b[3]]), &b[4..]),
-                DovCodec::LogU16 => (dequantize_dov(u16::from_le_bytes([b[0], b[1]])), &b[2..]),
-            };
-            let nvo = if self.nvo_bytes == 2 {
-                u32::from(u16::from_le_bytes([rest[0], rest[1]]))
-            } else {
-                u32::from_le_bytes([rest[0], rest[1], rest[2], rest[3]])
-            };
-            VEntry { dov, nvo }
-        }));
+        out.extend(bytes.chunks_exact(self.entry_bytes()).map(|b| self.decode_one(b)));
+    }
+
+    /// Decodes one V-entry from the first [`entry_bytes`](Self::entry_bytes) bytes of `b`.
+    fn decode_one(&self, b: &[u8]) -> VEntry {
+        let (dov, rest) = match self.dov {
+            DovCodec::F32 => (f32::from_le_bytes([b[0], b[1], b[2], b[3]]), &b[4..]),
+            DovCodec::LogU16 => (dequantize_dov(u16::from_le_bytes([b[0], b[1]])), &b[2..]),
+        };
+        let nvo = if self.nvo_bytes == 2 {
+            u32::from(u16::from_le_bytes([rest[0], rest[1]]))
+        } else {
+            u32::from_le_bytes([rest[0], rest[1], rest[2], rest[3]])
+        };
+        VEntry { dov, nvo }
+    }
+}
+
+/// The sparse-capable V-page encoding of the pointer-addressed layouts (vertical,
+/// indexed-vertical). A V-page record starts with a header `h` of `index_bytes` bytes (u8 when
+/// the layout's largest fan-out is ≤ 256, else u16, little-endian):
+///
+/// - `h = 0`: dense; the node's `fanout` V-entries follow, as without this encoding;
+/// - `h = k ≥ 1`: sparse; `k` pairs follow, each an entry index (`index_bytes` bytes, strictly
+///   ascending, `< fanout`) and that entry's V-entry; all other entries are (0, 0).
+///
+/// A stored V-page is visible, so it has at least one non-zero entry and `h = 0` is free to mark
+/// the dense form. The writer picks the shorter form (dense on a tie); sparse is shorter only
+/// when `k < fanout`, so `k` fits the header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct SparseCodec {
+    /// Bytes of the header and of each entry index: 1 or 2.
+    pub index_bytes: u8,
+}
+
+impl SparseCodec {
+    /// The encoding for a layout whose largest fan-out is `max_fanout`.
+    pub fn for_max_fanout(max_fanout: u16) -> Self {
+        Self { index_bytes: if max_fanout <= 256 { 1 } else { 2 } }
+    }
+
+    /// Bytes of the header (also of one entry index).
+    pub fn header_len(&self) -> usize {
+        usize::from(self.index_bytes)
+    }
+
+    fn put(&self, v: usize, out: &mut Vec<u8>) {
+        if self.index_bytes == 1 {
+            out.push(v as u8);
+        } else {
+            out.extend_from_slice(&(v as u16).to_le_bytes());
+        }
+    }
+
+    fn get(&self, b: &[u8]) -> usize {
+        if self.index_bytes == 1 { usize::from(b[0]) } else { usize::from(u16::from_le_bytes([b[0], b[1]])) }
+    }
+
+    /// Appends the shorter encoding of `entries` (one node's whole V-page) to `out`.
+    pub fn encode(&self, codec: &VPageCodec, entries: &[VEntry], out: &mut Vec<u8>) {
+        let e = codec.entry_bytes();
+        let visible = entries.iter().filter(|v| !v.is_zero()).count();
+        if visible > 0 && visible * (self.header_len() + e) < entries.len() * e {
+            self.put(visible, out);
+            for (i, v) in entries.iter().enumerate().filter(|(_, v)| !v.is_zero()) {
+                self.put(i, out);
+                codec.encode(std::slice::from_ref(v), out);
+            }
+        } else {
+            self.put(0, out);
+            codec.encode(entries, out);
+        }
+    }
+
+    /// The length of the whole record of a V-page of `fanout` entries whose first
+    /// [`header_len`](Self::header_len) bytes are `header`.
+    pub fn record_len(&self, codec: &VPageCodec, fanout: u16, header: &[u8]) -> Result<usize, String> {
+        let e = codec.entry_bytes();
+        match self.get(header) {
+            0 => Ok(self.header_len() + codec.vpage_bytes(fanout)),
+            k if k <= usize::from(fanout) => Ok(self.header_len() + k * (self.header_len() + e)),
+            k => Err(format!("sparse V-page lists {k} entries, the node has {fanout}")),
+        }
+    }
+
+    /// Decodes a whole record (as long as [`record_len`](Self::record_len) says) into the dense
+    /// V-page of `fanout` entries in `out` (cleared first).
+    pub fn decode(&self, codec: &VPageCodec, fanout: u16, bytes: &[u8], out: &mut Vec<VEntry>) -> Result<(), String> {
+        out.clear();
+        let want = self.record_len(codec, fanout, bytes)?;
+        if bytes.len() != want {
+            return Err(format!("V-page record of {} bytes, its header needs {want}", bytes.len()));
+        }
+        let h = self.header_len();
+        let body = &bytes[h..];
+        if self.get(bytes) == 0 {
+            codec.decode(body, out);
+            return Ok(());
+        }
+        out.resize(usize::from(fanout), VEntry::default());
+        let mut next = 0usize;
+        for pair in body.chunks_exact(h + codec.entry_bytes()) {
+            let i = self.get(pair);
+            if i < next || i >= usize::from(fanout) {
+                out.clear();
+                return Err(format!("sparse V-page: entry index {i} out of order or range (fan-out {fanout})"));
+            }
+            out[i] = codec.decode_one(&pair[h..]);
+            next = i + 1;
+        }
+        Ok(())
     }
 }
 
@@ -298,6 +396,41 @@ mod tests {
         codec.decode(&bytes, &mut out);
         assert_eq!(out[0].nvo, 70000);
         assert!((out[0].dov - 0.5).abs() <= 0.5 * LOG_DOV_REL_ERROR);
+    }
+
+    #[test]
+    fn sparse_form_is_chosen_exactly_when_shorter() {
+        // Fan-out 126, 6-byte entries, u8 indices: dense 1 + 756 bytes, sparse 1 + 7k.
+        let codec = VPageCodec::new(DovCodec::F32, 10);
+        let sp = SparseCodec::for_max_fanout(126);
+        for (k, sparse) in [(1usize, true), (107, true), (108, false), (126, false)] {
+            let mut page = vec![VEntry::default(); 126];
+            for e in page.iter_mut().rev().take(k) {
+                *e = VEntry { dov: 0.5, nvo: 2 };
+            }
+            let mut bytes = Vec::new();
+            sp.encode(&codec, &page, &mut bytes);
+            assert_eq!(bytes.len(), if sparse { 1 + 7 * k } else { 757 }, "k = {k}");
+            assert_eq!(bytes[0] as usize, if sparse { k } else { 0 });
+            assert_eq!(sp.record_len(&codec, 126, &bytes), Ok(bytes.len()));
+            let mut out = Vec::new();
+            sp.decode(&codec, 126, &bytes, &mut out).unwrap();
+            assert_eq!(out, page);
+            // A record cut short or extended is refused.
+            assert!(sp.decode(&codec, 126, &bytes[..bytes.len() - 1], &mut out).is_err());
+        }
+        // u16 indices above fan-out 256; a count above the fan-out is refused.
+        let sp = SparseCodec::for_max_fanout(300);
+        assert_eq!(sp.header_len(), 2);
+        assert!(sp.record_len(&codec, 300, &301u16.to_le_bytes()).is_err());
+        let mut page = vec![VEntry::default(); 300];
+        page[299] = VEntry { dov: 1.0, nvo: 1 };
+        let mut bytes = Vec::new();
+        sp.encode(&codec, &page, &mut bytes);
+        assert_eq!(
+            bytes,
+            [&1u16.to_le_bytes()[..], &299u16.to_le_bytes(), &1.0f32.to_le_bytes(), &1u16.to_le_bytes()].concat()
+        );
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE;
-use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
+use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
 use hdov_storage::vpage::LOG_DOV_REL_ERROR;
 use hdov_storage::{DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, VEntry, write_layout};
 use proptest::prelude::*;
@@ -69,16 +69,24 @@ fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
     }
 }
 
+/// One node's V-page of `f` entries: dense visibility (about a third of the DoVs drawn are
+/// zero) or sparse (each entry visible with probability 1/20), so that the sparse V-page
+/// encoding is exercised with both forms.
+fn arb_vpage(f: usize) -> impl Strategy<Value = Vec<VEntry>> {
+    // DoVs: hidden, ordinary, and below the log scale's floor; NVOs small or needing u32.
+    let entry = (prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6], prop_oneof![0u32..10, Just(70_000u32)])
+        .prop_map(|(dov, nvo)| VEntry { dov, nvo });
+    (any::<bool>(), prop::collection::vec((entry, 0u8..20), f)).prop_map(|(sparse, v)| {
+        v.into_iter().map(|(e, r)| if sparse && r != 0 { VEntry::default() } else { e }).collect()
+    })
+}
+
 fn arb_vdata() -> impl Strategy<Value = VData> {
-    (1u32..6, prop::collection::vec(0u16..40, 1..12)).prop_flat_map(|(cells, fanout)| {
-        // DoVs: hidden, ordinary, and below the log scale's floor; NVOs small or needing u32.
-        let entry = (prop_oneof![Just(0.0f32), 0.0f32..=1.0, 1e-12f32..1e-6], prop_oneof![0u32..10, Just(70_000u32)])
-            .prop_map(|(dov, nvo)| VEntry { dov, nvo });
+    // Fan-outs from 0, and some above 256 (sparse entry indices then take u16).
+    let fanout = prop_oneof![3 => 0u16..40, 1 => 250u16..=300];
+    (1u32..6, prop::collection::vec(fanout, 1..12)).prop_flat_map(|(cells, fanout)| {
         // Per node, visible with probability 1/2: its V-page, else nothing.
-        let cell: Vec<_> = fanout
-            .iter()
-            .map(|&f| prop::option::weighted(0.5, prop::collection::vec(entry.clone(), f as usize)))
-            .collect();
+        let cell: Vec<_> = fanout.iter().map(|&f| prop::option::weighted(0.5, arb_vpage(usize::from(f)))).collect();
         let cells_strategy = prop::collection::vec(cell, cells as usize);
         (Just(fanout), cells_strategy).prop_map(move |(node_fanout, raw)| VData {
             cell_count: cells,
@@ -95,18 +103,100 @@ fn arb_vdata() -> impl Strategy<Value = VData> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     #[test]
     fn layouts_agree_with_input(
         data in arb_vdata(),
         page_size in prop_oneof![Just(64u32), Just(100), Just(4096)],
         quantise in any::<bool>(),
+        sparse in any::<bool>(),
     ) {
         let dir = tempfile::tempdir().unwrap();
         let dov = if quantise { DovCodec::LogU16 } else { DovCodec::F32 };
-        write_all(dir.path(), &data, &LayoutOptions { page_size, dov });
+        write_all(dir.path(), &data, &LayoutOptions { page_size, dov, sparse });
         check_layouts(dir.path(), &data, dov);
+    }
+}
+
+/// Byte 3 of a layout's metadata (page 0 of its first file, after the `page_size`-byte header).
+fn meta_sparse_byte(dir: &Path, kind: LayoutKind, page_size: usize) -> u8 {
+    std::fs::read(dir.join(kind.file_names()[0])).unwrap()[page_size + 3]
+}
+
+#[test]
+fn sparse_vpages_round_trip_and_shrink_the_vertical_layouts() {
+    // Fan-out 126 with 5 % of a visible node's entries visible (u8 indices), and fan-out 300
+    // (u16 indices).
+    for (fanout, index_bytes) in [(126u16, 1u8), (300, 2)] {
+        let data = sparse_vdata(12, fanout, 2, 0.05, 3);
+        let mut entries = 0;
+        for (_, e) in data.cells.iter().flatten() {
+            entries += e.iter().filter(|v| !v.is_zero()).count();
+        }
+        let pages: usize = data.cells.iter().map(Vec::len).sum();
+        assert!(entries < pages * usize::from(fanout) / 10, "the data set is sparse");
+        for dov in [DovCodec::F32, DovCodec::LogU16] {
+            let dense = tempfile::tempdir().unwrap();
+            let sparse = tempfile::tempdir().unwrap();
+            write_all(dense.path(), &data, &LayoutOptions { dov, sparse: false, ..Default::default() });
+            write_all(sparse.path(), &data, &LayoutOptions { dov, ..Default::default() });
+            check_layouts(sparse.path(), &data, dov);
+            check_layouts(dense.path(), &data, dov);
+            for kind in LayoutKind::ALL {
+                let stored = if kind == LayoutKind::Horizontal { 0 } else { index_bytes };
+                assert_eq!(meta_sparse_byte(sparse.path(), kind, 4096), stored, "{kind}");
+                assert_eq!(meta_sparse_byte(dense.path(), kind, 4096), 0, "{kind}");
+                let bytes = |d: &Path| -> u64 {
+                    kind.file_names().iter().map(|f| std::fs::metadata(d.join(f)).unwrap().len()).sum()
+                };
+                let (d, s) = (bytes(dense.path()), bytes(sparse.path()));
+                match kind {
+                    LayoutKind::Horizontal => assert_eq!(d, s),
+                    // V-page bytes: each entry of 4..8 bytes becomes index + entry for 5 % of
+                    // entries, so the V-page file shrinks by far more than 3×.
+                    _ => {
+                        let vp = kind.file_names()[1];
+                        let size = |d: &Path| std::fs::metadata(d.join(vp)).unwrap().len();
+                        assert!(size(sparse.path()) * 3 < size(dense.path()), "{kind} {dov}: {s} vs {d}");
+                        assert!(s < d);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn sparse_encoding_picks_the_smaller_form() {
+    // A V-page with every entry visible stays dense (header 0) in a sparse layout; one with a
+    // single visible entry becomes header 1, its index, its entry.
+    let full = vec![VEntry { dov: 0.5, nvo: 1 }; 4];
+    let mut one = vec![VEntry::default(); 4];
+    one[2] = VEntry { dov: 0.25, nvo: 7 };
+    let data = VData { cell_count: 1, node_fanout: vec![4, 4], cells: vec![vec![(0, full), (1, one)]] };
+    let dir = tempfile::tempdir().unwrap();
+    write_layout(dir.path(), LayoutKind::Vertical, &data, &LayoutOptions { page_size: 64, ..Default::default() })
+        .unwrap();
+    let b = std::fs::read(dir.path().join("vpages.vertical")).unwrap();
+    let page = &b[64..128];
+    // Dense: header 0, 4 × (f32 0.5, u16 1).
+    assert_eq!(page[0], 0);
+    assert_eq!(&page[1..5], &0.5f32.to_le_bytes());
+    assert_eq!(&page[5..7], &1u16.to_le_bytes());
+    // Sparse: at 1 + 4·6 = 25: count 1, index 2, f32 0.25, u16 7; then zero padding.
+    assert_eq!(&page[25..27], &[1, 2]);
+    assert_eq!(&page[27..31], &0.25f32.to_le_bytes());
+    assert_eq!(&page[31..33], &7u16.to_le_bytes());
+    assert!(page[33..60].iter().all(|&x| x == 0));
+    check_layouts_one(dir.path(), LayoutKind::Vertical, &data);
+}
+
+fn check_layouts_one(dir: &Path, kind: LayoutKind, data: &VData) {
+    let mut r = LayoutReader::open(dir, kind, ReadMode::Mmap).unwrap();
+    r.flip_to_cell(0).unwrap();
+    for (node, want) in &data.cells[0] {
+        assert_eq!(r.vpage(*node).unwrap().as_deref(), Some(&want[..]));
     }
 }
 
@@ -118,7 +208,7 @@ fn synthetic_round_trip_small_pages() {
     for dov in [DovCodec::F32, DovCodec::LogU16] {
         for page_size in [64, 4096] {
             let dir = tempfile::tempdir().unwrap();
-            write_all(dir.path(), &data, &LayoutOptions { page_size, dov });
+            write_all(dir.path(), &data, &LayoutOptions { page_size, dov, ..Default::default() });
             check_layouts(dir.path(), &data, dov);
         }
     }

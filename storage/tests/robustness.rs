@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
+use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
 use hdov_storage::{
     BlobFile, BlobWriter, DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, PageFile, ReadMode, write_layout,
 };
@@ -85,7 +85,7 @@ fn mutate(rng: &mut Rng, good: &[u8]) -> Vec<u8> {
 fn sample_layouts(dir: &Path, page_size: u32, dov: DovCodec) {
     let data = synthetic_vdata(&SyntheticSpec { cells: 5, fanout: 6, levels: 3, reach: 0.3, ..Default::default() });
     for kind in LayoutKind::ALL {
-        write_layout(dir, kind, &data, &LayoutOptions { page_size, dov }).unwrap();
+        write_layout(dir, kind, &data, &LayoutOptions { page_size, dov, ..Default::default() }).unwrap();
     }
 }
 
@@ -98,22 +98,46 @@ fn read_layout_fully(dir: &Path, kind: LayoutKind) -> Result<u64, Error> {
     Ok(total)
 }
 
+/// Sparse V-data (fan-out 20 with u8 entry indices, or 300 with u16) in the vertical layouts.
+fn sparse_layouts(dir: &Path, fanout: u16) {
+    let data = sparse_vdata(4, fanout, 2, 0.08, 5);
+    for kind in [LayoutKind::Vertical, LayoutKind::IndexedVertical] {
+        write_layout(dir, kind, &data, &LayoutOptions { page_size: 64, ..Default::default() }).unwrap();
+    }
+}
+
 #[test]
 fn random_mutations_of_layout_files_never_panic() {
     let good = tempfile::tempdir().unwrap();
     sample_layouts(good.path(), 64, DovCodec::F32);
-    let mut rng = Rng(0x5EED);
+    mutation_rounds(good.path(), &LayoutKind::ALL, 150, 0x5EED);
+}
+
+#[test]
+fn random_mutations_of_sparse_vpages_never_panic() {
+    let kinds = [LayoutKind::Vertical, LayoutKind::IndexedVertical];
+    for (fanout, seed) in [(20, 0xA11CE), (300, 0xB0B)] {
+        let good = tempfile::tempdir().unwrap();
+        sparse_layouts(good.path(), fanout);
+        mutation_rounds(good.path(), &kinds, 100, seed);
+    }
+}
+
+/// `rounds` random mutations per layout of the layouts in `good`, half with checksums
+/// recomputed, each through open + verify in both read modes.
+fn mutation_rounds(good: &Path, kinds: &[LayoutKind], rounds: usize, seed: u64) {
+    let mut rng = Rng(seed);
     let work = tempfile::tempdir().unwrap();
     let mut outcomes = [0usize; 2];
-    for kind in LayoutKind::ALL {
-        let expected = read_layout_fully(good.path(), kind).unwrap();
+    for &kind in kinds {
+        let expected = read_layout_fully(good, kind).unwrap();
         assert!(expected > 0);
-        for round in 0..150 {
+        for round in 0..rounds {
             let victim = kind.file_names()[rng.below(kind.file_names().len())];
             let dir: PathBuf = work.path().join(format!("{kind}-{round}"));
             fs::create_dir(&dir).unwrap();
             for f in kind.file_names() {
-                let mut bytes = fs::read(good.path().join(f)).unwrap();
+                let mut bytes = fs::read(good.join(f)).unwrap();
                 if *f == victim {
                     bytes = mutate(&mut rng, &bytes);
                     if round % 2 == 0 {
@@ -135,7 +159,8 @@ fn random_mutations_of_layout_files_never_panic() {
         }
     }
     // Both outcomes occur: the loop probes the decoders, not only the checksums.
-    assert!(outcomes[0] > 50 && outcomes[1] > 10, "{outcomes:?}");
+    let n = kinds.len() * rounds;
+    assert!(outcomes[0] > n / 9 && outcomes[1] > n / 45, "{outcomes:?}");
 }
 
 #[test]
@@ -268,4 +293,101 @@ fn mismatched_builds_and_bad_metadata_are_corrupt() {
     });
     let e = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
+}
+
+/// A damage to a file image.
+type Edit<'a> = Box<dyn Fn(&mut Vec<u8>) + 'a>;
+
+/// The first V-page record of cell 0 (the root's) in `vpages.vertical` written with 4 KiB
+/// pages: its header and first entry index, edited, must give a `Corrupt` error on read.
+#[test]
+fn sparse_vpage_count_or_index_out_of_range_is_corrupt() {
+    const P: usize = 4096;
+    for (fanout, idx) in [(126u16, 1usize), (300, 2)] {
+        let good = tempfile::tempdir().unwrap();
+        let data = sparse_vdata(2, fanout, 2, 0.05, 9);
+        for kind in [LayoutKind::Vertical, LayoutKind::IndexedVertical] {
+            write_layout(good.path(), kind, &data, &LayoutOptions::default()).unwrap();
+        }
+        let vp = fs::read(good.path().join("vpages.vertical")).unwrap();
+        let get = |at: usize| {
+            if idx == 1 { usize::from(vp[at]) } else { usize::from(u16::from_le_bytes([vp[at], vp[at + 1]])) }
+        };
+        let count = get(P);
+        assert!(count >= 2 && count < usize::from(fanout), "root V-page is sparse with ≥ 2 entries: {count}");
+        let entry = 6; // f32 DoV, u16 NVO
+        let first_index = P + idx;
+        let second_index = first_index + idx + entry;
+        let put = |b: &mut Vec<u8>, at: usize, v: usize| {
+            if idx == 1 {
+                b[at] = v as u8;
+            } else {
+                b[at..at + 2].copy_from_slice(&(v as u16).to_le_bytes());
+            }
+        };
+        let cases: Vec<(&str, Edit)> = vec![
+            ("count above the fan-out", Box::new(|b| put(b, P, usize::from(fanout) + 1))),
+            ("largest count", Box::new(|b| put(b, P, if idx == 1 { 255 } else { 65535 }))),
+            ("index = fan-out", Box::new(|b| put(b, first_index, usize::from(fanout)))),
+            ("largest index", Box::new(|b| put(b, first_index, if idx == 1 { 255 } else { 65535 }))),
+            ("indices not ascending", Box::new(|b| put(b, second_index, get(first_index)))),
+        ];
+        for (what, edit) in cases {
+            if idx == 1 && what == "largest count" && fanout > 255 {
+                continue;
+            }
+            let d = damaged_vertical(good.path(), "vpages.vertical", |b| {
+                edit(b);
+                refresh_page_checksums(b);
+            });
+            let mut r = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap();
+            r.flip_to_cell(0).unwrap();
+            let e = r.vpage(0).unwrap_err();
+            assert!(matches!(e, Error::Corrupt { .. }), "{fanout}, {what}: {e}");
+            assert!(e.to_string().contains("node 0"), "{e}");
+            let e = read_layout_fully(d.path(), LayoutKind::Vertical).unwrap_err();
+            assert!(matches!(e, Error::Corrupt { .. }), "{fanout}, {what}: {e}");
+        }
+    }
+}
+
+#[test]
+fn sparse_metadata_must_match_the_fan_outs() {
+    let good = tempfile::tempdir().unwrap();
+    sparse_layouts(good.path(), 20);
+    // u8 indices recorded as 1; 2 (u16) does not fit fan-outs ≤ 256, 3 is unknown.
+    for (v, msg) in [(2u8, "the fan-outs need 1"), (3, "V-page encoding 3")] {
+        let d = damaged_vertical(good.path(), "vindex.vertical", |b| {
+            assert_eq!(b[64 + 3], 1);
+            b[64 + 3] = v;
+            refresh_page_checksums(b);
+        });
+        let e = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
+        assert!(matches!(e, Error::Corrupt { .. }) && e.to_string().contains(msg), "{e}");
+    }
+    // Horizontal never has sparse V-pages.
+    let h = tempfile::tempdir().unwrap();
+    sample_layouts(h.path(), 64, DovCodec::F32);
+    let path = h.path().join("vpages.horizontal");
+    let mut b = fs::read(&path).unwrap();
+    b[64 + 3] = 1;
+    refresh_page_checksums(&mut b);
+    fs::write(&path, b).unwrap();
+    let e = LayoutReader::open(h.path(), LayoutKind::Horizontal, ReadMode::Mmap).unwrap_err();
+    assert!(matches!(e, Error::Corrupt { .. }) && e.to_string().contains("V-page encoding 1"), "{e}");
+}
+
+/// Copies the vertical layouts to a fresh directory with `edit` applied to file `name`.
+fn damaged_vertical(good: &Path, name: &str, edit: impl Fn(&mut Vec<u8>)) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for kind in [LayoutKind::Vertical, LayoutKind::IndexedVertical] {
+        for f in kind.file_names() {
+            let mut b = fs::read(good.join(f)).unwrap();
+            if *f == name {
+                edit(&mut b);
+            }
+            fs::write(dir.path().join(f), b).unwrap();
+        }
+    }
+    dir
 }

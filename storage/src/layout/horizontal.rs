@@ -32,6 +32,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let meta = Meta {
         kind: LayoutKind::Horizontal,
         codec: w.codec,
+        sparse: w.sparse,
         cell_count: data.cell_count,
         node_count: data.node_fanout.len() as u32,
         data_start,

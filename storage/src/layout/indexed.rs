@@ -47,6 +47,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let meta = Meta {
         kind: LayoutKind::IndexedVertical,
         codec: w.codec,
+        sparse: w.sparse,
         cell_count: data.cell_count,
         node_count: nodes as u32,
         data_start,

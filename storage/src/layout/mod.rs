@@ -24,7 +24,7 @@ use crate::error::{Error, Result};
 use crate::io_stats::{FileIo, IoStats};
 use crate::le::{u32_at, u64_at};
 use crate::pagefile::{MIN_PAGE_SIZE, PageFile, ReadMode};
-use crate::vpage::{DovCodec, VData, VDataStats, VEntry, VPageCodec};
+use crate::vpage::{DovCodec, SparseCodec, VData, VDataStats, VEntry, VPageCodec};
 use packing::{Addr, PagedFile, record_pages};
 
 /// Which layout.
@@ -91,11 +91,15 @@ pub struct LayoutOptions {
     pub page_size: u32,
     /// How DoVs are stored.
     pub dov: DovCodec,
+    /// Vertical and indexed-vertical: store each V-page densely or as its visible entries
+    /// (index, V-entry), whichever is smaller (`docs/storage-format.md` §5). Horizontal ignores
+    /// it: its V-page slots are found by arithmetic, so they keep one fixed size.
+    pub sparse: bool,
 }
 
 impl Default for LayoutOptions {
     fn default() -> Self {
-        Self { page_size: 4096, dov: DovCodec::F32 }
+        Self { page_size: 4096, dov: DovCodec::F32, sparse: true }
     }
 }
 
@@ -152,7 +156,9 @@ pub fn write_layout(dir: &Path, kind: LayoutKind, data: &VData, opts: &LayoutOpt
     }
     let stats = data.stats();
     let codec = VPageCodec::new(opts.dov, stats.nvo_max);
-    let w = WriteCtx { dir, data, stats, codec, page_size: opts.page_size };
+    let sparse = (opts.sparse && kind != LayoutKind::Horizontal)
+        .then(|| SparseCodec::for_max_fanout(data.node_fanout.iter().copied().max().unwrap_or(0)));
+    let w = WriteCtx { dir, data, stats, codec, sparse, page_size: opts.page_size };
     match kind {
         LayoutKind::Horizontal => horizontal::write(&w),
         LayoutKind::Vertical => vertical::write(&w),
@@ -166,12 +172,22 @@ pub(crate) struct WriteCtx<'a> {
     pub data: &'a VData,
     pub stats: VDataStats,
     pub codec: VPageCodec,
+    /// The sparse-capable V-page encoding, if used (never for horizontal).
+    pub sparse: Option<SparseCodec>,
     pub page_size: u32,
 }
 
 impl WriteCtx<'_> {
     pub fn cap(&self) -> usize {
         self.page_size as usize - crate::pagefile::PAGE_CRC_LEN
+    }
+
+    /// Appends the record of one stored V-page (dense, or the shorter form when sparse).
+    pub fn encode_vpage(&self, entries: &[VEntry], out: &mut Vec<u8>) {
+        match &self.sparse {
+            Some(sp) => sp.encode(&self.codec, entries, out),
+            None => self.codec.encode(entries, out),
+        }
     }
 }
 
@@ -185,6 +201,8 @@ pub(crate) const DIR_ENTRY_BYTES: usize = packing::ADDR_BYTES + 4;
 pub(crate) struct Meta {
     pub kind: LayoutKind,
     pub codec: VPageCodec,
+    /// The sparse-capable V-page encoding (metadata byte 3: 0 none, else its index bytes).
+    pub sparse: Option<SparseCodec>,
     pub cell_count: u32,
     pub node_count: u32,
     /// First page after the metadata.
@@ -211,7 +229,8 @@ impl Meta {
             Vec::with_capacity(
                 Meta::encoded_len(self.kind, u64::from(self.cell_count), u64::from(self.node_count)) as usize
             );
-        b.extend_from_slice(&[self.kind.code(), self.codec.dov.code(), self.codec.nvo_bytes, 0]);
+        let sparse = self.sparse.map_or(0, |s| s.index_bytes);
+        b.extend_from_slice(&[self.kind.code(), self.codec.dov.code(), self.codec.nvo_bytes, sparse]);
         b.extend_from_slice(&self.cell_count.to_le_bytes());
         b.extend_from_slice(&self.node_count.to_le_bytes());
         b.extend_from_slice(&(self.data_start as u32).to_le_bytes());
@@ -247,6 +266,16 @@ impl Meta {
         if nvo_bytes != 2 && nvo_bytes != 4 {
             return Err(bad(format!("NVO width {nvo_bytes}, expected 2 or 4")));
         }
+        let sparse = match fixed[3] {
+            0 => None,
+            1 | 2 if kind != LayoutKind::Horizontal => Some(SparseCodec { index_bytes: fixed[3] }),
+            v => {
+                return Err(bad(format!(
+                    "V-page encoding {v}, expected 0{}",
+                    if kind == LayoutKind::Horizontal { "" } else { ", 1 or 2" }
+                )));
+            }
+        };
         let field32 = |at| u32_at(&fixed, at).unwrap_or(0);
         let field64 = |at| u64_at(&fixed, at).unwrap_or(0);
         let cell_count = field32(4);
@@ -268,6 +297,18 @@ impl Meta {
             .chunks_exact(2)
             .map(|c| u16::from_le_bytes([c[0], c[1]]))
             .collect();
+        if let Some(sp) = sparse {
+            let want = SparseCodec::for_max_fanout(fanout.iter().copied().max().unwrap_or(0));
+            if sp != want {
+                return Err(Error::corrupt(
+                    file.path(),
+                    format!(
+                        "layout metadata: sparse V-pages with {}-byte indices, the fan-outs need {}",
+                        sp.index_bytes, want.index_bytes
+                    ),
+                ));
+            }
+        }
         let mut directory = Vec::new();
         if kind == LayoutKind::IndexedVertical {
             let start = META_FIXED + 2 * node_count as usize;
@@ -282,6 +323,7 @@ impl Meta {
         Ok(Meta {
             kind,
             codec: VPageCodec { dov, nvo_bytes },
+            sparse,
             cell_count,
             node_count,
             data_start,
@@ -466,6 +508,16 @@ impl LayoutReader {
         let Some(addr) = addr else {
             return Ok(false);
         };
+        if let Some(sp) = self.meta.sparse {
+            // Header first (its page is then held, so the record read costs no more pages).
+            let codec = self.meta.codec;
+            let bad = |f: &PagedFile, r: String| f.corrupt(format!("cell {cell}, node {node}: {r}"));
+            self.vpages.read_record(addr, sp.header_len(), &mut self.bytes)?;
+            let len = sp.record_len(&codec, fanout, &self.bytes).map_err(|r| bad(&self.vpages, r))?;
+            self.vpages.read_record(addr, len, &mut self.bytes)?;
+            sp.decode(&codec, fanout, &self.bytes, out).map_err(|r| bad(&self.vpages, r))?;
+            return Ok(true);
+        }
         self.vpages.read_record(addr, len, &mut self.bytes)?;
         if matches!(self.state, State::Horizontal(_)) && self.bytes.iter().all(|&b| b == 0) {
             // Horizontal stores hidden nodes as zero V-pages.

@@ -4,7 +4,9 @@
 //!
 //! Files: `vindex.vertical` = metadata, then the C segments as equal-size slots (6·N_node
 //! bytes each: u32 page + u16 offset per node, nil = 0xFFFFFFFF/0xFFFF), slot `c` found by
-//! arithmetic; `vpages.vertical` = the visible V-pages, cell by cell, dfs order within a cell.
+//! arithmetic; `vpages.vertical` = the visible V-pages, cell by cell, dfs order within a cell,
+//! each dense or, with sparse encoding on, as the shorter of the two forms of
+//! [`SparseCodec`](crate::vpage::SparseCodec).
 
 use std::path::Path;
 
@@ -39,7 +41,7 @@ pub(crate) fn write_cell_vpages(w: &WriteCtx<'_>, path: &Path, tag: [u8; 4]) -> 
                 continue;
             }
             buf.clear();
-            w.codec.encode(entries, &mut buf);
+            w.encode_vpage(entries, &mut buf);
             a.push((*node, p.put(&buf)?));
         }
         addrs.push(a);
@@ -62,6 +64,7 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     let meta = Meta {
         kind: LayoutKind::Vertical,
         codec: w.codec,
+        sparse: w.sparse,
         cell_count: data.cell_count,
         node_count: nodes as u32,
         data_start,
