@@ -10,7 +10,8 @@ use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 
 /// Instances of one icosphere and one cube around the origin under varied transforms: plain
 /// translations, random rotations, non-uniform scales, and mirroring scales (one or three negative
-/// axes), plus a ground slab; object 1 is a big box around the viewpoint `inside`.
+/// axes), plus a ground slab, a cube flattened to a square (a singular transform) below the
+/// origin; object 1 is a big box around the viewpoint `inside`.
 fn instanced_scene() -> (Scene, Vec3) {
     let mut rng = Rng(7);
     let mut b = SceneBuilder::default();
@@ -19,6 +20,11 @@ fn instanced_scene() -> (Scene, Vec3) {
     b.aabox(Vec3::new(-40.0, -4.0, -40.0), Vec3::new(40.0, -3.0, 40.0));
     let inside = Vec3::new(15.0, 2.0, -12.0);
     b.object(cube, Mat4::from_scale_rotation_translation(Vec3::new(4.0, 3.0, 5.0), Quat::from_rotation_y(0.3), inside));
+    // A flattened (singular) transform: traced in world space, not as an instance.
+    let flat = b.object(
+        cube,
+        Mat4::from_scale_rotation_translation(Vec3::new(6.0, 0.0, 6.0), Quat::IDENTITY, Vec3::new(0.0, -2.0, 0.0)),
+    );
     while b.scene.objects.len() < 120 {
         let i = b.scene.objects.len();
         let c = Vec3::new(rng.range(-20.0, 20.0), rng.range(-2.0, 8.0), rng.range(-20.0, 20.0));
@@ -42,8 +48,13 @@ fn instanced_scene() -> (Scene, Vec3) {
         }
         b.object(if i % 2 == 0 { sphere } else { cube }, Mat4::from_scale_rotation_translation(scale, rotation, c));
     }
+    assert_eq!(flat, 2);
     (b.build(), inside)
 }
+
+/// The flattened cube of [`instanced_scene`]: its bottom face lies on its top face, so about half
+/// of its texels show a back face.
+const FLATTENED: u32 = 2;
 
 /// Every object as its own base mesh, already in world space (identity transform); mirrored
 /// objects get their winding flipped so that counter-clockwise still faces outwards.
@@ -83,7 +94,11 @@ fn instances_trace_like_baked_world_meshes() {
         let differ: Vec<usize> = (0..a.ids.len()).filter(|&i| a.ids[i] != b.ids[i]).collect();
         let seen: std::collections::BTreeSet<u32> =
             a.ids.iter().filter(|&&id| id != NO_OBJECT).map(|id| id & !BACK_FACE_BIT).collect();
-        let back = a.ids.iter().filter(|&&id| id != NO_OBJECT && id & BACK_FACE_BIT != 0).count();
+        let back = a
+            .ids
+            .iter()
+            .filter(|&&id| id != NO_OBJECT && id & BACK_FACE_BIT != 0 && id & !BACK_FACE_BIT != FLATTENED)
+            .count();
         println!(
             "viewpoint {p}: {} of {} texels differ, {} objects seen, {back} back-face texels",
             differ.len(),
@@ -105,4 +120,41 @@ fn instances_trace_like_baked_world_meshes() {
             assert!(back < a.ids.len() / 1000, "{p}: {back} back-face texels outside every object");
         }
     }
+}
+
+/// Timing on a scene file (not run by default): `HDOV_SCENE=/tmp/large2/city.json cargo test
+/// --release --test dov_instances -- --ignored --nocapture`. Prints the BVH build time and the
+/// time per sample point at R = 128 over a 4 × 4 lattice of points at eye height.
+#[test]
+#[ignore]
+fn scene_file_timing() {
+    let Ok(path) = std::env::var("HDOV_SCENE") else { return };
+    let (scene, _) = Scene::load(std::path::Path::new(&path)).unwrap();
+    let t0 = std::time::Instant::now();
+    let mut backend = CpuBackend::new(&scene, 128).unwrap();
+    let build = t0.elapsed();
+    let b = scene.bounds();
+    let mut ids = IdCube::new(128);
+    let mut points = 0;
+    let t1 = std::time::Instant::now();
+    let mut checksum = 0u64;
+    let mut dump = Vec::new();
+    for i in 0..4 {
+        for j in 0..4 {
+            let f = |k: usize, lo: f32, hi: f32| lo + (hi - lo) * (k as f32 + 0.5) / 4.0;
+            let p = Vec3::new(f(i, b.min.x, b.max.x), 1.7, f(j, b.min.z, b.max.z));
+            backend.render_ids(p, &mut ids).unwrap();
+            checksum = ids.ids.iter().fold(checksum, |h, &id| h.wrapping_mul(31).wrapping_add(id as u64));
+            dump.extend(ids.ids.iter().flat_map(|id| id.to_le_bytes()));
+            points += 1;
+        }
+    }
+    let per_point = t1.elapsed() / points;
+    if let Ok(out) = std::env::var("HDOV_DUMP_IDS") {
+        std::fs::write(out, dump).unwrap();
+    }
+    println!(
+        "{}: build {build:?}, {per_point:?} per sample point (R = 128), ids checksum {checksum:x}",
+        backend.name()
+    );
 }
