@@ -124,7 +124,8 @@ fn instances_trace_like_baked_world_meshes() {
 
 /// Timing on a scene file (not run by default): `HDOV_SCENE=/tmp/large2/city.json cargo test
 /// --release --test dov_instances -- --ignored --nocapture`. Prints the BVH build time and the
-/// time per sample point at R = 128 over a 4 × 4 lattice of points at eye height.
+/// time per sample point at R = 128 over an 8 × 8 lattice of points at eye height (wall clock, and
+/// CPU time of the process from /proc, which a loaded machine disturbs less).
 #[test]
 #[ignore]
 fn scene_file_timing() {
@@ -136,12 +137,19 @@ fn scene_file_timing() {
     let b = scene.bounds();
     let mut ids = IdCube::new(128);
     let mut points = 0;
+    let cpu_seconds = || {
+        let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+        let fields: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+        let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok()).unwrap_or(0.0);
+        (ticks(11) + ticks(12)) / 100.0
+    };
+    let c1 = cpu_seconds();
     let t1 = std::time::Instant::now();
     let mut checksum = 0u64;
     let mut dump = Vec::new();
-    for i in 0..4 {
-        for j in 0..4 {
-            let f = |k: usize, lo: f32, hi: f32| lo + (hi - lo) * (k as f32 + 0.5) / 4.0;
+    for i in 0..8 {
+        for j in 0..8 {
+            let f = |k: usize, lo: f32, hi: f32| lo + (hi - lo) * (k as f32 + 0.5) / 8.0;
             let p = Vec3::new(f(i, b.min.x, b.max.x), 1.7, f(j, b.min.z, b.max.z));
             backend.render_ids(p, &mut ids).unwrap();
             checksum = ids.ids.iter().fold(checksum, |h, &id| h.wrapping_mul(31).wrapping_add(id as u64));
@@ -150,11 +158,14 @@ fn scene_file_timing() {
         }
     }
     let per_point = t1.elapsed() / points;
+    let cpu_per_point = (cpu_seconds() - c1) / points as f64;
     if let Ok(out) = std::env::var("HDOV_DUMP_IDS") {
         std::fs::write(out, dump).unwrap();
     }
     println!(
-        "{}: build {build:?}, {per_point:?} per sample point (R = 128), ids checksum {checksum:x}",
-        backend.name()
+        "{}: build {build:?}, {per_point:?} per sample point (R = 128), CPU {:.1} ms per point, ids checksum \
+         {checksum:x}",
+        backend.name(),
+        cpu_per_point * 1e3
     );
 }
