@@ -9,6 +9,14 @@
 //! Each face is rendered into its own R32Uint 2D texture (copying 2D-array layers to a buffer
 //! reads back zeros on the GL backend), then all six are copied into one mapped buffer and
 //! weighed on the CPU with [`super::IdCube::dov`], exactly as the CPU backend's ids are.
+//!
+//! **LOD-aware drawing** ([`GpuBackend::with_options`] with [`GpuOptions::lods`]): every coarser
+//! leaf LOD of every object is uploaded too, in world space right after the object's full-detail
+//! triangles, and per sample point each object is drawn at the coarsest level whose world-space
+//! error, seen from the point at the distance of the object's box, subtends less than
+//! [`GpuOptions::lod_tolerance_texels`] texels at the face centre (a texel there spans 2/R
+//! radians). An object whose box contains the point is drawn at full detail. docs/dov.md
+//! ("LOD-aware drawing") has the measured DoV change and speed-up.
 
 use std::sync::mpsc;
 
@@ -20,11 +28,40 @@ use super::cubemap::{FACE_COUNT, face_basis};
 use super::{CubeMap, DovBackend, IdCube};
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
-use crate::scene::Scene;
+use crate::lod::LodLevel;
+use crate::scene::{Mesh, Scene};
 
 /// Bytes between the six per-face uniform blocks (the largest `min_uniform_buffer_offset_alignment`
 /// wgpu allows).
 const UNIFORM_STRIDE: u64 = 256;
+
+/// Default of [`GpuOptions::lod_tolerance_texels`]: a twentieth of a texel at the face centre.
+/// Half a texel (the first guess) changes some objects' DoV by up to 10 centre texels on a
+/// generated city, because the simplifier's error is not a bound on silhouette movement and a
+/// shifted silhouette changes an area in proportion to its length; 0.05 keeps every object within
+/// the backends' agreement tolerance (0.5 % of its DoV + 2 centre texels) at R = 128 and 256
+/// (docs/dov.md, "LOD-aware drawing").
+pub const DEFAULT_LOD_TOLERANCE_TEXELS: f32 = 0.05;
+
+/// Construction options of [`GpuBackend::with_options`].
+#[derive(Clone, Copy, Debug)]
+pub struct GpuOptions<'a> {
+    /// Near distance along each face's forward axis; `None`: [`super::default_near`] of the scene.
+    pub near: Option<f32>,
+    /// Leaf LOD chains per base mesh (finest first, as [`crate::lod::SceneLods::leaf`]), to draw
+    /// each object at the coarsest level the measurement cannot tell apart; `None`: always full
+    /// detail. Level 0 is not used: full detail is always the scene's own triangles.
+    pub lods: Option<&'a [Vec<LodLevel>]>,
+    /// An object is drawn at a level whose world error / distance to the object's box is below
+    /// this many texels at the face centre (each 2/R radians). 0 draws full detail throughout.
+    pub lod_tolerance_texels: f32,
+}
+
+impl Default for GpuOptions<'_> {
+    fn default() -> Self {
+        Self { near: None, lods: None, lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS }
+    }
+}
 
 /// Environment variable that makes the GPU tests fail instead of skip when no adapter exists.
 pub const REQUIRE_ADAPTER_ENV: &str = "HDOV_REQUIRE_ADAPTER";
@@ -113,8 +150,13 @@ pub struct GpuBackend {
     uniforms: wgpu::Buffer,
     face_bind_groups: Vec<wgpu::BindGroup>,
     vertices: Option<wgpu::Buffer>,
-    /// Vertex range of each object in the vertex buffer, in draw (descending id) order.
-    draw_ranges: Vec<std::ops::Range<u32>>,
+    /// Per object in draw (descending id) order, its levels finest first: the vertex range in
+    /// the vertex buffer and the world-space error (0 for full detail).
+    draw_levels: Vec<Vec<LevelRange>>,
+    /// Largest world error / distance drawn at a coarser level (radians); 0 without LODs.
+    lod_max_angle: f32,
+    /// Triangles drawn since construction, over all faces and points.
+    triangles_drawn: u64,
     /// Bounds of each object in draw order, relative to `origin`.
     draw_bounds: Vec<Aabb>,
     origin: Vec3,
@@ -134,7 +176,30 @@ impl GpuBackend {
 
     /// As [`GpuBackend::new`] with an explicit near distance along each face's forward axis.
     pub fn with_near(scene: &Scene, resolution: u32, near: f32) -> Result<Self> {
+        Self::with_options(scene, resolution, &GpuOptions { near: Some(near), ..Default::default() })
+    }
+
+    /// As [`GpuBackend::new`] with [`GpuOptions`]: near plane and LOD-aware drawing. With
+    /// `options.lods`, every coarser level of every object is uploaded as well (world space, so
+    /// GPU memory grows by the coarser levels' triangles: at most about as much again as the
+    /// scene for ratio ½, +29 % on the small generated city).
+    /// Fails with [`Error::BadArgument`] when `lods` has not one chain per base mesh
+    /// or the tolerance is negative or not finite.
+    pub fn with_options(scene: &Scene, resolution: u32, options: &GpuOptions) -> Result<Self> {
+        let near = options.near.unwrap_or_else(|| super::default_near(&scene.bounds()));
         check_resolution_and_near(resolution, near)?;
+        let tolerance = options.lod_tolerance_texels;
+        if !(tolerance.is_finite() && tolerance >= 0.0) {
+            return Err(Error::bad_arg("LOD tolerance", format!("{tolerance} must be finite and >= 0")));
+        }
+        if let Some(lods) = options.lods
+            && lods.len() != scene.meshes.len()
+        {
+            return Err(Error::bad_arg(
+                "LODs",
+                format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
+            ));
+        }
         let adapter = request_adapter().map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
         let adapter_name = describe(&adapter.get_info());
         let limits = adapter.limits();
@@ -157,7 +222,7 @@ impl GpuBackend {
         let out_of_memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let origin = scene.bounds().center();
         let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
-        let geometry = Geometry::build(scene, origin)?;
+        let geometry = Geometry::build(scene, origin, options.lods)?;
         let max_buffer = limits.max_buffer_size;
         let vertex_bytes = (geometry.vertices.len() * std::mem::size_of::<Vertex>()) as u64;
         if vertex_bytes > max_buffer {
@@ -260,7 +325,9 @@ impl GpuBackend {
             uniforms,
             face_bind_groups,
             vertices,
-            draw_ranges: geometry.draw_ranges,
+            draw_levels: geometry.draw_levels,
+            lod_max_angle: if options.lods.is_some() { tolerance * 2.0 / resolution as f32 } else { 0.0 },
+            triangles_drawn: 0,
             draw_bounds: geometry.draw_bounds,
             origin,
             face_targets,
@@ -279,15 +346,49 @@ impl GpuBackend {
         self.near
     }
 
+    /// Triangles drawn since construction, summed over every face of every rendering.
+    pub fn triangles_drawn(&self) -> u64 {
+        self.triangles_drawn
+    }
+
+    /// Whether LOD-aware drawing is on (LODs given and a tolerance above 0).
+    pub fn lod_drawing(&self) -> bool {
+        self.lod_max_angle > 0.0
+    }
+
+    /// Per object in draw order, the vertex range of the level to draw from `eye`: the coarsest
+    /// whose world error / distance to the object's box is below the tolerance angle; full
+    /// detail when the box contains the eye.
+    fn chosen_ranges(&self, eye: Vec3) -> Vec<std::ops::Range<u32>> {
+        self.draw_levels
+            .iter()
+            .zip(&self.draw_bounds)
+            .map(|(levels, bounds)| {
+                if levels.len() == 1 || self.lod_max_angle <= 0.0 {
+                    return levels[0].vertices.clone();
+                }
+                // Distance from the eye to the box (0 inside it, so full detail there).
+                let distance = (bounds.min - eye).max(eye - bounds.max).max(Vec3::ZERO).length();
+                let budget = self.lod_max_angle * distance;
+                levels
+                    .iter()
+                    .rev()
+                    .find(|l| l.error < budget)
+                    .map_or_else(|| levels[0].vertices.clone(), |l| l.vertices.clone())
+            })
+            .collect()
+    }
+
     /// Vertex ranges to draw for one face: objects whose box may reach into the face's frustum,
-    /// consecutive ones merged. Conservative: a box is dropped only when it lies wholly outside
-    /// one of the frustum's planes (or wholly nearer than the near plane).
-    fn visible_ranges(&self, face: usize, eye: Vec3) -> Vec<std::ops::Range<u32>> {
+    /// at the levels in `chosen` (one range per object in draw order), consecutive ones merged.
+    /// Conservative: a box is dropped only when it lies wholly outside one of the frustum's
+    /// planes (or wholly nearer than the near plane).
+    fn visible_ranges(&self, face: usize, eye: Vec3, chosen: &[std::ops::Range<u32>]) -> Vec<std::ops::Range<u32>> {
         let b = face_basis(face);
         // Inside the frustum: n·d ≥ 0 for each side normal, forward·d ≥ near.
         let sides = [b.forward - b.right, b.forward + b.right, b.forward - b.up, b.forward + b.up];
         let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
-        for (range, bounds) in self.draw_ranges.iter().zip(&self.draw_bounds) {
+        for (range, bounds) in chosen.iter().zip(&self.draw_bounds) {
             if range.is_empty() {
                 continue;
             }
@@ -309,16 +410,25 @@ impl GpuBackend {
     }
 }
 
+/// One level of one object in the vertex buffer.
+#[derive(Clone, Debug)]
+struct LevelRange {
+    vertices: std::ops::Range<u32>,
+    /// The simplifier's error scaled to world units by the transform's largest axis scale.
+    error: f32,
+}
+
 /// The scene as one vertex buffer (three vertices per triangle, no sharing: every object is its
-/// own world-space copy), objects in descending id order.
+/// own world-space copy), objects in descending id order, each object's full detail followed by
+/// its coarser LODs (when given).
 struct Geometry {
     vertices: Vec<Vertex>,
-    draw_ranges: Vec<std::ops::Range<u32>>,
+    draw_levels: Vec<Vec<LevelRange>>,
     draw_bounds: Vec<Aabb>,
 }
 
 impl Geometry {
-    fn build(scene: &Scene, origin: Vec3) -> Result<Self> {
+    fn build(scene: &Scene, origin: Vec3, lods: Option<&[Vec<LodLevel>]>) -> Result<Self> {
         let (triangles, objects) = world_triangles(scene)?;
         // Triangles are grouped by object in ascending order; walk the groups backwards.
         let mut starts = vec![0usize; scene.objects.len() + 1];
@@ -328,8 +438,11 @@ impl Geometry {
         for i in 1..starts.len() {
             starts[i] += starts[i - 1];
         }
-        let mut vertices = Vec::with_capacity(triangles.len() * 3);
-        let mut draw_ranges = Vec::with_capacity(scene.objects.len());
+        let extra: usize = lods.map_or(0, |lods| {
+            scene.objects.iter().map(|o| lods[o.mesh as usize].iter().skip(1).map(|l| l.faces()).sum::<usize>()).sum()
+        });
+        let mut vertices = Vec::with_capacity((triangles.len() + extra) * 3);
+        let mut draw_levels = Vec::with_capacity(scene.objects.len());
         let mut draw_bounds = Vec::with_capacity(scene.objects.len());
         for object in (0..scene.objects.len()).rev() {
             let first = vertices.len() as u32;
@@ -341,13 +454,42 @@ impl Geometry {
                     vertices.push(Vertex { position: rel.to_array(), id: object as u32 });
                 }
             }
-            draw_ranges.push(first..vertices.len() as u32);
+            let mut levels = vec![LevelRange { vertices: first..vertices.len() as u32, error: 0.0 }];
+            if let Some(lods) = lods {
+                let o = &scene.objects[object];
+                let m = o.transform;
+                let scale =
+                    m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
+                let mirrored = m.determinant() < 0.0;
+                for level in lods[o.mesh as usize].iter().skip(1) {
+                    let first = vertices.len() as u32;
+                    push_world(&mut vertices, &level.mesh, &m, mirrored, origin, object as u32);
+                    // Culling must keep a coarse level that bulges out of the full-detail box.
+                    for v in &vertices[first as usize..] {
+                        bounds = bounds.grow(Vec3::from(v.position));
+                    }
+                    levels.push(LevelRange { vertices: first..vertices.len() as u32, error: level.error * scale });
+                }
+            }
+            draw_levels.push(levels);
             draw_bounds.push(bounds);
+            if vertices.len() > u32::MAX as usize {
+                return Err(Error::Gpu(format!("{} vertices exceed u32 vertex indices", vertices.len())));
+            }
         }
-        if vertices.len() > u32::MAX as usize {
-            return Err(Error::Gpu(format!("{} vertices exceed u32 vertex indices", vertices.len())));
+        Ok(Self { vertices, draw_levels, draw_bounds })
+    }
+}
+
+/// Appends `mesh` transformed by `m` (winding reversed when `mirrored`, as the full-detail
+/// triangles are), relative to `origin`, with object id `id`.
+fn push_world(vertices: &mut Vec<Vertex>, mesh: &Mesh, m: &Mat4, mirrored: bool, origin: Vec3, id: u32) {
+    for t in mesh.triangles() {
+        let t = if mirrored { [t[0], t[2], t[1]] } else { t };
+        for p in t {
+            let rel = m.transform_point3(p) - origin;
+            vertices.push(Vertex { position: rel.to_array(), id });
         }
-        Ok(Self { vertices, draw_ranges, draw_bounds })
     }
 }
 
@@ -434,6 +576,7 @@ impl DovBackend for GpuBackend {
         check_cube(out, r)?;
         let eye = p - self.origin;
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let chosen = self.chosen_ranges(eye);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
                 clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
@@ -444,7 +587,8 @@ impl DovBackend for GpuBackend {
         let mut encoder =
             self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
         for face in 0..FACE_COUNT {
-            let ranges = self.visible_ranges(face, eye);
+            let ranges = self.visible_ranges(face, eye, &chosen);
+            self.triangles_drawn += ranges.iter().map(|r| r.len() as u64 / 3).sum::<u64>();
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("dov face"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
