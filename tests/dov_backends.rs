@@ -160,15 +160,15 @@ fn backend_kinds_parse_and_open() {
     assert_eq!("auto".parse::<BackendKind>().unwrap(), BackendKind::Auto);
     assert!("metal".parse::<BackendKind>().is_err());
     let scene = sphere_scene(1, Vec3::new(0.0, 0.0, 3.0), 1.0);
-    let cpu = open_backend(&scene, 8, BackendKind::Cpu).unwrap();
+    let cpu = open_backend(&scene, 8, BackendKind::Cpu, &Default::default()).unwrap();
     assert!(cpu.name().starts_with("cpu"));
     // Auto never fails for want of an adapter; it picks the GPU on graphics hardware only (on
     // Mesa's CPU rasterisers the ray caster is faster).
-    let auto = open_backend(&scene, 8, BackendKind::Auto).unwrap();
+    let auto = open_backend(&scene, 8, BackendKind::Auto, &Default::default()).unwrap();
     let hardware = hdov::dov::gpu::hardware_adapter_available();
     assert_eq!(auto.name().starts_with("gpu"), hardware, "{}", auto.name());
     // Bad arguments are errors, not panics.
-    assert!(open_backend(&scene, 0, BackendKind::Cpu).is_err());
-    let mut b = open_backend(&scene, 8, BackendKind::Cpu).unwrap();
+    assert!(open_backend(&scene, 0, BackendKind::Cpu, &Default::default()).is_err());
+    let mut b = open_backend(&scene, 8, BackendKind::Cpu, &Default::default()).unwrap();
     assert!(b.measure(Vec3::NAN).is_err());
 }

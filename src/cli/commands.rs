@@ -103,6 +103,11 @@ pub struct VisibilityArgs {
     /// How V-entries store DoV: f32, or log-u16 (smaller; error bound in docs/storage-format.md).
     #[arg(long, default_value = "f32")]
     dov_codec: DovCodec,
+    /// GPU backend: draw an object at a coarser LOD when its simplification error, seen from the
+    /// sample point, is below this many texels (0 = always full detail). 0.05 keeps every
+    /// object's DoV within 0.5 % + 2 texels of full detail (docs/dov.md); the CPU backend ignores it.
+    #[arg(long, default_value_t = crate::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS)]
+    lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// neighbours (a neighbouring cell's corner sees it), or none.
     #[arg(long, default_value = "box,neighbours", value_delimiter = ',')]
@@ -121,6 +126,7 @@ impl VisibilityArgs {
             layouts: self.layouts.iter().map(|k| k.name().to_string()).collect(),
             dov_codec: self.dov_codec.to_string(),
             shard: self.shard,
+            lod_draw_tolerance: self.lod_draw_tolerance,
             zero_dov_floor: self.zero_dov_floor.iter().filter(|t| t.as_str() != "none").cloned().collect(),
         })
     }
@@ -410,7 +416,7 @@ pub fn dov(a: DovArgs) -> Result<()> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    let mut backend = crate::dov::open_backend(&scene, a.resolution, a.backend)?;
+    let mut backend = crate::dov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
     let point = backend.measure(a.at)?;
     let mut objects: Vec<_> = point.objects.iter().map(|&(id, d)| (id, d)).collect();
     objects.sort_by(|x, y| y.1.total_cmp(&x.1));

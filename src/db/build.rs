@@ -9,8 +9,9 @@ use hdov_storage::{BlobWriter, DirTxn, PageFileWriter};
 use super::catalog::{Catalog, LodRef, ObjectRecord};
 use super::tree_page::{self, NodePage};
 use super::*;
-use crate::dov::open_backend;
+use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
+use crate::dov::{BackendKind, open_backend};
 use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
@@ -69,8 +70,12 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     geometry.finish()?;
-    // The meshes are on disk now; the DoV stage needs the memory more.
-    drop(lods);
+    // The meshes are on disk now; the DoV stage needs the memory more, and at most the leaf
+    // chains (for LOD-aware drawing on the GPU).
+    let draws_lods =
+        params.visibility.as_ref().is_some_and(|v| v.backend != BackendKind::Cpu && v.lod_draw_tolerance > 0.0);
+    let leaf_lods = draws_lods.then_some(lods.leaf);
+    drop(lods.internal);
 
     let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, params.page_size)?;
     let objects_under = tree.subtree_object_counts();
@@ -99,7 +104,9 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     cat.finish()?;
 
     let visibility = match (&params.visibility, scene.grid) {
-        (Some(v), Some(grid)) => Some(build_visibility(scene, &tree, &grid, v, params.page_size, &dir, progress)?),
+        (Some(v), Some(grid)) => {
+            Some(build_visibility(scene, &tree, leaf_lods.as_deref(), &grid, v, params.page_size, &dir, progress)?)
+        }
         _ => None,
     };
 
@@ -134,9 +141,11 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
 }
 
 /// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.
+#[allow(clippy::too_many_arguments)]
 fn build_visibility(
     scene: &Scene,
     tree: &RTree,
+    leaf_lods: Option<&[Vec<LodLevel>]>,
     grid: &ViewGrid,
     v: &VisibilityParams,
     page_size: u32,
@@ -146,7 +155,8 @@ fn build_visibility(
     let kinds = v.layout_kinds()?;
     let codec = v.codec()?;
     let t = Instant::now();
-    let mut backend = open_backend(scene, v.resolution, v.backend)?;
+    let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, near: None };
+    let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions {

@@ -80,6 +80,9 @@ pub struct VisibilityParams {
     /// it). Empty: no floor.
     #[serde(default)]
     pub zero_dov_floor: Vec<String>,
+    /// GPU backend: texels of LOD error below which an object is drawn coarser (0 = off).
+    #[serde(default)]
+    pub lod_draw_tolerance: f32,
 }
 
 impl Default for VisibilityParams {
@@ -92,6 +95,7 @@ impl Default for VisibilityParams {
             dov_codec: DovCodec::F32.to_string(),
             shard: None,
             zero_dov_floor: vec!["box".into(), "neighbours".into()],
+            lod_draw_tolerance: crate::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS,
         }
     }
 }

@@ -186,7 +186,14 @@ impl std::str::FromStr for BackendKind {
 /// Opens the backend `kind` for `scene` at `resolution`. `Auto` uses the CPU backend when no
 /// hardware adapter exists or the GPU backend cannot be set up (the reason is dropped: ask for
 /// `Gpu` explicitly to see it). Costs the backend's construction: a BVH build or an upload.
-pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendKind) -> Result<Box<dyn DovBackend>> {
+///
+/// `gpu` configures the GPU backend (LOD-aware drawing); the CPU backend ignores it.
+pub fn open_backend(
+    scene: &crate::scene::Scene,
+    resolution: u32,
+    kind: BackendKind,
+    gpu: &gpu::GpuOptions,
+) -> Result<Box<dyn DovBackend>> {
     if !(1..=4096).contains(&resolution) {
         return Err(crate::Error::bad_arg(
             "--resolution",
@@ -195,9 +202,9 @@ pub fn open_backend(scene: &crate::scene::Scene, resolution: u32, kind: BackendK
     }
     match kind {
         BackendKind::Cpu => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
-        BackendKind::Gpu => Ok(Box::new(GpuBackend::new(scene, resolution)?)),
+        BackendKind::Gpu => Ok(Box::new(GpuBackend::with_options(scene, resolution, gpu)?)),
         BackendKind::Auto if !gpu::hardware_adapter_available() => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
-        BackendKind::Auto => match GpuBackend::new(scene, resolution) {
+        BackendKind::Auto => match GpuBackend::with_options(scene, resolution, gpu) {
             Ok(gpu) => Ok(Box::new(gpu)),
             Err(crate::Error::Gpu(_)) => Ok(Box::new(CpuBackend::new(scene, resolution)?)),
             Err(e) => Err(e),
