@@ -10,7 +10,9 @@
 use std::time::Instant;
 
 use hdov::city::{CityParams, CityScale};
+use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
 use hdov::dov::{CpuBackend, DovBackend, GpuBackend, PointDov};
+use hdov::lod::{LodParams, leaf_chain};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -20,6 +22,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
     let grid = scene.grid.expect("the city brings a grid");
     let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
+    let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
+    let lod_options =
+        GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, near: None };
     // Corners spread over the grid: a deterministic stride through the corner ids.
     let stride = (grid.corner_count() / points).max(1);
     let at: Vec<_> =
@@ -33,13 +38,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let cpu_setup = t.elapsed().as_secs_f64();
         let (cpu_s, cpu_dov) = measure_all(&mut cpu, &at)?;
         let mut rows = vec![("cpu", cpu.name(), cpu_setup, cpu_s, None)];
-        let t = Instant::now();
-        if let Ok(mut gpu) = GpuBackend::new(&scene, r) {
-            // Setup includes the upload and a first, untimed measurement (pipeline warm-up).
-            gpu.measure(at[0])?;
-            let setup = t.elapsed().as_secs_f64();
-            let (gpu_s, gpu_dov) = measure_all(&mut gpu, &at)?;
-            rows.push(("gpu", gpu.name(), setup, gpu_s, Some(agreement(&cpu_dov, &gpu_dov))));
+        for (label, options) in [("gpu", GpuOptions::default()), ("gpu-lod", lod_options)] {
+            let options = if label == "gpu" { GpuOptions { lod_tolerance_texels: 0.0, ..options } } else { options };
+            let t = Instant::now();
+            if let Ok(mut gpu) = GpuBackend::with_options(&scene, r, &options) {
+                // Setup includes the upload and a first, untimed measurement (pipeline warm-up).
+                gpu.measure(at[0])?;
+                let setup = t.elapsed().as_secs_f64();
+                let (gpu_s, gpu_dov) = measure_all(&mut gpu, &at)?;
+                rows.push((label, gpu.name(), setup, gpu_s, Some(agreement(&cpu_dov, &gpu_dov))));
+            }
         }
         for (backend, adapter, setup, secs, agree) in rows {
             let per_point = secs / at.len() as f64;
