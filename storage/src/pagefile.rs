@@ -299,3 +299,24 @@ fn decode_header(path: &Path, h: &[u8; HEADER_LEN], kind: [u8; 4]) -> Result<(u3
     let page_count = u64_at(h, 20).unwrap_or(0);
     Ok((page_size, page_count))
 }
+
+/// Recomputes the header and page checksums of a page-file image in memory, so that a mutated
+/// payload reaches the decoders behind the checksum check. For fault-injection tests and
+/// fuzzing only; images with an implausible page size are left alone.
+pub fn reseal_checksums(image: &mut [u8]) {
+    if image.len() < HEADER_LEN {
+        return;
+    }
+    let ps = u32::from_le_bytes(image[16..20].try_into().expect("4 bytes")) as usize;
+    if !(MIN_PAGE_SIZE as usize..=65536).contains(&ps) {
+        return;
+    }
+    let crc = crc32fast::hash(&image[0..28]);
+    image[28..32].copy_from_slice(&crc.to_le_bytes());
+    for page in image.chunks_mut(ps).skip(1) {
+        if page.len() == ps {
+            let crc = crc32fast::hash(&page[..ps - PAGE_CRC_LEN]);
+            page[ps - PAGE_CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+}

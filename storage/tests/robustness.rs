@@ -24,25 +24,7 @@ impl Rng {
     }
 }
 
-/// Recomputes the header and page checksums of a page file image, so that mutated payloads
-/// reach the layout decoders. Leaves images with an implausible page size alone.
-fn refresh_page_checksums(b: &mut [u8]) {
-    if b.len() < 32 {
-        return;
-    }
-    let ps = u32::from_le_bytes(b[16..20].try_into().unwrap()) as usize;
-    if !(64..=65536).contains(&ps) {
-        return;
-    }
-    let crc = crc32fast::hash(&b[0..28]);
-    b[28..32].copy_from_slice(&crc.to_le_bytes());
-    for page in b.chunks_mut(ps).skip(1) {
-        if page.len() == ps {
-            let crc = crc32fast::hash(&page[..ps - 4]);
-            page[ps - 4..].copy_from_slice(&crc.to_le_bytes());
-        }
-    }
-}
+use hdov_storage::pagefile::reseal_checksums as refresh_page_checksums;
 
 fn refresh_blob_checksums(b: &mut [u8]) {
     if b.len() >= 32 {

@@ -3,26 +3,9 @@
 //! bytes 1..5 split the rest into the layout's first and second file.
 #![no_main]
 
+use hdov_storage::pagefile::reseal_checksums as refresh_checksums;
 use hdov_storage::{LayoutKind, LayoutReader, ReadMode};
 use libfuzzer_sys::fuzz_target;
-
-fn refresh_checksums(b: &mut [u8]) {
-    if b.len() < 32 {
-        return;
-    }
-    let ps = u32::from_le_bytes(b[16..20].try_into().unwrap()) as usize;
-    if !(64..=65536).contains(&ps) {
-        return;
-    }
-    let crc = crc32fast::hash(&b[0..28]);
-    b[28..32].copy_from_slice(&crc.to_le_bytes());
-    for page in b.chunks_mut(ps).skip(1) {
-        if page.len() == ps {
-            let crc = crc32fast::hash(&page[..ps - 4]);
-            page[ps - 4..].copy_from_slice(&crc.to_le_bytes());
-        }
-    }
-}
 
 fuzz_target!(|data: &[u8]| {
     if data.len() < 5 {
