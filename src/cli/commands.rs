@@ -418,7 +418,7 @@ pub fn dov(a: DovArgs) -> Result<()> {
     }
     let mut backend = crate::dov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
     let point = backend.measure(a.at)?;
-    let mut objects: Vec<_> = point.objects.iter().map(|&(id, d)| (id, d)).collect();
+    let mut objects = point.objects.clone();
     objects.sort_by(|x, y| y.1.total_cmp(&x.1));
     if a.json {
         let doc = json!({
