@@ -1,0 +1,69 @@
+//! Per-cell agreement of the two DoV backends on the default city: the from-region DoV of every
+//! object and tree node, as `hdov build` stores them, for one shard of the grid's cells.
+//!
+//! `cargo run --release -p hdov-tools --bin backend-cells -- [R] [SHARD I/N]`
+
+use hdov::city::{CityParams, CityScale};
+use hdov::db::tree_page::fanout;
+use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
+use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, precompute_shard};
+use hdov::dov::{CpuBackend, DovBackend, GpuBackend};
+use hdov::lod::{LodParams, leaf_chain};
+use hdov::rtree::{RTree, TreeAlgorithm};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let r: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(64);
+    let shard = Shard::parse(&args.next().unwrap_or_else(|| "0/8".into()))?;
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
+    let grid = scene.grid.expect("the city brings a grid");
+    let tree = RTree::build(&scene.all_object_bounds(), fanout(4096), TreeAlgorithm::Str);
+    let shape =
+        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+    let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
+    let run = |b: &mut dyn DovBackend| -> hdov::Result<Vec<(u32, CellDov)>> {
+        let opts = PrecomputeOptions::default();
+        Ok(precompute_shard(b, &grid, &scene.all_object_bounds(), &shape, &opts, shard, &mut |_, _| {})?.cells)
+    };
+    let cpu = run(&mut CpuBackend::new(&scene, r)?)?;
+    let options = GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, near: None };
+    let mut gpu_backend = GpuBackend::with_options(&scene, r, &options)?;
+    let adapter = gpu_backend.name();
+    let gpu = run(&mut gpu_backend)?;
+    let texel = hdov::dov::CubeMap::new(r).texel_floor();
+    let (mut pairs, mut max, mut sum, mut over, mut flips) = (0usize, 0.0f64, 0.0f64, 0usize, 0usize);
+    let (mut node_max, mut nvo_diff) = (0.0f64, 0u32);
+    for ((_, a), (_, b)) in cpu.iter().zip(&gpu) {
+        for o in 0..scene.objects.len() as u32 {
+            let (x, y) = (a.object(o) as f64, b.object(o) as f64);
+            if x == 0.0 && y == 0.0 {
+                continue;
+            }
+            let d = (x - y).abs();
+            pairs += 1;
+            sum += d;
+            max = max.max(d);
+            over += usize::from(d > 0.005 * x.max(y) + 2.0 * texel);
+            flips += usize::from((x == 0.0) != (y == 0.0));
+        }
+        for n in 0..tree.nodes.len() as u32 {
+            let ((x, nx), (y, ny)) = (a.node(n), b.node(n));
+            node_max = node_max.max(((x - y) as f64).abs());
+            nvo_diff = nvo_diff.max(nx.abs_diff(ny));
+        }
+    }
+    println!(
+        "default city, cells {:?} of {}, R = {r}; cpu vs {adapter} (LOD drawing {DEFAULT_LOD_TOLERANCE_TEXELS} texels)",
+        shard.cells(&grid),
+        grid.cell_count()
+    );
+    println!(
+        "objects: {pairs} visible (cell, object) pairs; |dDoV| max {max:.3e} ({:.1} centre texels), mean {:.3e} ({:.3} texels); \
+         beyond 0.5 % + 2 texels: {over}; visible on one backend only: {flips}",
+        max / texel,
+        sum / pairs.max(1) as f64,
+        sum / pairs.max(1) as f64 / texel
+    );
+    println!("nodes: |dDoV| max {node_max:.3e} ({:.1} texels); NVO differs by at most {nvo_diff}", node_max / texel);
+    Ok(())
+}
