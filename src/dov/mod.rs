@@ -126,6 +126,77 @@ impl PointDov {
     }
 }
 
+/// Per-object differences between two measurements of the same points (two backends, or one
+/// backend with and without an approximation), for tests and experiment tools.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DovDiff {
+    /// Objects compared: seen by either measurement.
+    pub objects: usize,
+    pub max_abs: f64,
+    pub sum_abs: f64,
+    /// Largest |Δ| / max(a, b).
+    pub max_rel: f64,
+    pub sum_rel: f64,
+    /// Objects seen by one measurement only.
+    pub flips: usize,
+    /// Objects whose difference exceeds the backend-agreement tolerance: 0.5 % of the DoV plus
+    /// two centre texels.
+    pub over_tolerance: usize,
+}
+
+impl DovDiff {
+    /// Adds one object's two values; `texel` is the centre-texel weight (`CubeMap::texel_floor`).
+    /// Objects that neither measurement sees are not counted.
+    pub fn add(&mut self, a: f64, b: f64, texel: f64) {
+        if a == 0.0 && b == 0.0 {
+            return;
+        }
+        let delta = (a - b).abs();
+        self.objects += 1;
+        self.max_abs = self.max_abs.max(delta);
+        self.sum_abs += delta;
+        self.max_rel = self.max_rel.max(delta / a.max(b));
+        self.sum_rel += delta / a.max(b);
+        self.flips += usize::from((a == 0.0) != (b == 0.0));
+        self.over_tolerance += usize::from(delta > 0.005 * a.max(b) + 2.0 * texel);
+    }
+
+    /// Adds every object either point measurement sees.
+    pub fn add_points(&mut self, a: &PointDov, b: &PointDov, texel: f64) {
+        let mut ids: Vec<u32> = a.objects.iter().chain(&b.objects).map(|e| e.0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        for id in ids {
+            self.add(a.get(id), b.get(id), texel);
+        }
+    }
+
+    pub fn mean_abs(&self) -> f64 {
+        self.sum_abs / self.objects.max(1) as f64
+    }
+
+    pub fn mean_rel(&self) -> f64 {
+        self.sum_rel / self.objects.max(1) as f64
+    }
+}
+
+/// Up to `n` grid corners in open space (the backend sees no surface from behind there), spread
+/// evenly over the grid's corners: street sample points for experiments. Measures about `12·n`
+/// corners.
+pub fn open_corners(grid: &crate::grid::ViewGrid, backend: &mut dyn DovBackend, n: usize) -> Result<Vec<Vec3>> {
+    let corners = grid.corner_count();
+    let step = (corners / (12 * n.max(1))).max(1);
+    let mut points = Vec::new();
+    for id in (0..corners).step_by(step) {
+        let p = grid.corner_position(grid.corner_coords(id));
+        if backend.measure(p)?.back_face == 0.0 {
+            points.push(p);
+        }
+    }
+    let keep = (points.len() / n.max(1)).max(1);
+    Ok(points.into_iter().step_by(keep).take(n).collect())
+}
+
 /// A way of rendering the id cube around a point. The resolution is fixed at construction.
 pub trait DovBackend {
     /// Human-readable name, with the adapter for the GPU backend.

@@ -7,7 +7,7 @@ use hdov::city::{CityParams, CityScale};
 use hdov::db::tree_page::fanout;
 use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
 use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::{CpuBackend, DovBackend, GpuBackend};
+use hdov::dov::{CpuBackend, DovBackend, DovDiff, GpuBackend};
 use hdov::lod::{LodParams, leaf_chain};
 use hdov::rtree::{RTree, TreeAlgorithm};
 
@@ -31,20 +31,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let adapter = gpu_backend.name();
     let gpu = run(&mut gpu_backend)?;
     let texel = hdov::dov::CubeMap::new(r).texel_floor();
-    let (mut pairs, mut max, mut sum, mut over, mut flips) = (0usize, 0.0f64, 0.0f64, 0usize, 0usize);
+    let mut d = DovDiff::default();
     let (mut node_max, mut nvo_diff) = (0.0f64, 0u32);
     for ((_, a), (_, b)) in cpu.iter().zip(&gpu) {
         for o in 0..scene.objects.len() as u32 {
-            let (x, y) = (a.object(o) as f64, b.object(o) as f64);
-            if x == 0.0 && y == 0.0 {
-                continue;
-            }
-            let d = (x - y).abs();
-            pairs += 1;
-            sum += d;
-            max = max.max(d);
-            over += usize::from(d > 0.005 * x.max(y) + 2.0 * texel);
-            flips += usize::from((x == 0.0) != (y == 0.0));
+            d.add(a.object(o) as f64, b.object(o) as f64, texel);
         }
         for n in 0..tree.nodes.len() as u32 {
             let ((x, nx), (y, ny)) = (a.node(n), b.node(n));
@@ -58,11 +49,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         grid.cell_count()
     );
     println!(
-        "objects: {pairs} visible (cell, object) pairs; |dDoV| max {max:.3e} ({:.1} centre texels), mean {:.3e} ({:.3} texels); \
-         beyond 0.5 % + 2 texels: {over}; visible on one backend only: {flips}",
-        max / texel,
-        sum / pairs.max(1) as f64,
-        sum / pairs.max(1) as f64 / texel
+        "objects: {} visible (cell, object) pairs; |dDoV| max {:.3e} ({:.1} centre texels), mean {:.3e} ({:.3} texels); \
+         beyond 0.5 % + 2 texels: {}; visible on one backend only: {}",
+        d.objects,
+        d.max_abs,
+        d.max_abs / texel,
+        d.mean_abs(),
+        d.mean_abs() / texel,
+        d.over_tolerance,
+        d.flips
     );
     println!("nodes: |dDoV| max {node_max:.3e} ({:.1} texels); NVO differs by at most {nvo_diff}", node_max / texel);
     Ok(())

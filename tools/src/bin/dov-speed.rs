@@ -67,20 +67,11 @@ fn measure_all(b: &mut dyn DovBackend, at: &[glam::Vec3]) -> hdov::Result<(f64, 
     let out = at.iter().map(|&p| b.measure(p)).collect::<hdov::Result<Vec<_>>>()?;
     Ok((t.elapsed().as_secs_f64(), out))
 }
-
 /// Max and mean |ΔDoV| over every object either backend sees, and how many that is.
 fn agreement(a: &[PointDov], b: &[PointDov]) -> (f64, f64, usize) {
-    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0);
+    let mut d = hdov::dov::DovDiff::default();
     for (x, y) in a.iter().zip(b) {
-        let mut ids: Vec<u32> = x.objects.iter().chain(&y.objects).map(|o| o.0).collect();
-        ids.sort_unstable();
-        ids.dedup();
-        for id in ids {
-            let d = (x.get(id) - y.get(id)).abs();
-            max = max.max(d);
-            sum += d;
-            n += 1;
-        }
+        d.add_points(x, y, 0.0);
     }
-    (max, sum / n.max(1) as f64, n)
+    (d.max_abs, d.mean_abs(), d.objects)
 }
