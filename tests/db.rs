@@ -1,15 +1,45 @@
 //! The database directory: round trips of every file, and refusal of damaged ones.
 
-mod common;
+mod dov_common;
 
 use std::path::Path;
+
+use glam::{Mat4, Vec3};
+use hdov::scene::{BaseMesh, Object, Scene};
 
 use hdov::db::{self, BuildParams, Database};
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
 
+/// A small town: `n × n` boxes of varied height, each its own base mesh, and a sphere instanced
+/// on every other street corner (so instancing is exercised).
+fn town(n: usize) -> Scene {
+    let mut scene = Scene::default();
+    scene.meshes.push(BaseMesh { name: "ball".into(), mesh: dov_common::icosphere(3) });
+    for i in 0..n {
+        for j in 0..n {
+            let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
+            let h = 5.0 + ((i * 7 + j * 13) % 11) as f32 * 3.0;
+            let name = format!("house_{i}_{j}");
+            let place = Mat4::from_translation(Vec3::new(x + 6.0, h / 2.0, z + 6.0))
+                * Mat4::from_scale(Vec3::new(12.0, h, 12.0));
+            scene.objects.push(Object {
+                name: name.clone(),
+                mesh: scene.meshes.len() as u32,
+                transform: Mat4::IDENTITY,
+            });
+            scene.meshes.push(BaseMesh { name, mesh: hdov::lod::transformed(&dov_common::unit_cube(), &place) });
+            if (i + j) % 2 == 0 {
+                let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
+                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
+            }
+        }
+    }
+    scene
+}
+
 fn build(dir: &Path, params: &BuildParams) -> hdov::db::build::BuildReport {
-    let scene = common::town(8);
+    let scene = town(8);
     db::build::build(&scene, dir, params, false, &Progress::hidden()).unwrap()
 }
 
@@ -19,7 +49,7 @@ fn tree_pages_and_lods_round_trip() {
     let dir = tmp.path().join("db");
     let params = BuildParams { page_size: 256, ..Default::default() };
     build(&dir, &params);
-    let scene = common::town(8);
+    let scene = town(8);
     let boxes = scene.all_object_bounds();
     let tree = RTree::build(&boxes, hdov::db::tree_page::fanout(256), TreeAlgorithm::Str);
     let db = Database::open(&dir).unwrap();
@@ -52,10 +82,10 @@ fn existing_database_is_kept_without_force_and_replaced_with_it() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("db");
     build(&dir, &BuildParams::default());
-    let scene = common::town(3);
+    let scene = town(3);
     let err = db::build::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
     assert!(err.to_string().contains("--force"), "{err}");
-    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, common::town(8).objects.len());
+    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, town(8).objects.len());
     db::build::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
     assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, scene.objects.len());
     // No temporary directory is left beside the target.
