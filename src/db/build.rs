@@ -103,9 +103,9 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     cat.append(&bytes)?;
     cat.finish()?;
 
-    let visibility = match (&params.visibility, scene.grid) {
+    let visibility = match (&params.visibility, &scene.grid) {
         (Some(v), Some(grid)) => {
-            Some(build_visibility(scene, &tree, leaf_lods.as_deref(), &grid, v, params.page_size, &dir, progress)?)
+            Some(build_visibility(scene, &tree, leaf_lods.as_deref(), grid, v, params.page_size, &dir, progress)?)
         }
         _ => None,
     };

@@ -13,8 +13,8 @@
 //! Work can be split into shards of disjoint cells ([`Shard`]); their outputs merge by
 //! concatenation.
 
-use std::collections::HashMap;
 use std::collections::hash_map::Entry;
+use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 
@@ -141,6 +141,20 @@ pub enum FloorTest {
     /// neighbours' corners are measured for their own cells anyway (a shard measures one extra
     /// layer of corners around its cells).
     NeighbourCorners,
+}
+
+impl FloorTest {
+    /// Whether this test finds `object` (with world box `bounds`) possibly visible from the cell
+    /// `cell_box`; `seen_nearby` holds the objects that the neighbouring cells' corners see.
+    pub fn finds(&self, object: u32, bounds: &Aabb, cell_box: &Aabb, seen_nearby: &HashSet<u32>) -> bool {
+        match *self {
+            FloorTest::BoxWithin(margin) => {
+                let m = Vec3::splat(margin);
+                !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
+            }
+            FloorTest::NeighbourCorners => seen_nearby.contains(&object),
+        }
+    }
 }
 
 /// Options of a precomputation.
@@ -334,7 +348,7 @@ pub fn cell_dov(
 
     let mut floored = 0;
     if !options.zero_dov_tests.is_empty() {
-        let seen_around: std::collections::HashSet<u32> = if options.uses_neighbours() {
+        let seen_around: HashSet<u32> = if options.uses_neighbours() {
             around.iter().filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect()
         } else {
             Default::default()
@@ -345,13 +359,8 @@ pub fn cell_dov(
             if object_max.contains_key(&object) {
                 continue;
             }
-            let possibly_visible = options.zero_dov_tests.iter().any(|t| match *t {
-                FloorTest::BoxWithin(margin) => {
-                    let m = Vec3::splat(margin);
-                    !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
-                }
-                FloorTest::NeighbourCorners => seen_around.contains(&object),
-            });
+            let possibly_visible =
+                options.zero_dov_tests.iter().any(|t| t.finds(object, bounds, cell_box, &seen_around));
             if possibly_visible {
                 object_max.insert(object, floor);
                 floored += 1;
@@ -417,7 +426,6 @@ pub fn audit_zero_dov(
     interior_samples: &[u32],
     tests: &[FloorTest],
 ) -> Result<Vec<ZeroDovAudit>> {
-    use std::collections::HashSet;
     let mut audits: Vec<ZeroDovAudit> = interior_samples
         .iter()
         .flat_map(|&k| tests.iter().map(move |&test| (k, test)))
@@ -461,13 +469,7 @@ pub fn audit_zero_dov(
                 if sparse.contains(&object) {
                     continue;
                 }
-                let floored = match audit.test {
-                    FloorTest::BoxWithin(margin) => {
-                        let m = Vec3::splat(margin);
-                        !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
-                    }
-                    FloorTest::NeighbourCorners => around.contains(&object),
-                };
+                let floored = audit.test.finds(object, bounds, &cell_box, &around);
                 let seen = by_dense.contains(&object);
                 audit.zero_dov += seen as usize;
                 audit.caught += (seen && floored) as usize;
