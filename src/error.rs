@@ -15,9 +15,10 @@ pub enum Error {
     /// A file whose contents are not what they must be (malformed, truncated, corrupted).
     #[error("{}: {reason}", path.display())]
     BadFile { path: PathBuf, reason: String },
-    /// A command-line or API argument that cannot be used.
-    #[error("{arg}: {reason}")]
-    BadArgument { arg: String, reason: String },
+    /// A parameter that cannot be used, named as the library names it (`resolution`,
+    /// `grid`, ...); a user interface maps the name to its own (the `hdov` command to a flag).
+    #[error("{param}: {reason}")]
+    BadParam { param: String, reason: String },
     /// An error from the storage crate (pages, layouts).
     #[error(transparent)]
     Storage(#[from] hdov_storage::Error),
@@ -35,7 +36,7 @@ impl Error {
     pub fn bad_file(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         Error::BadFile { path: path.into(), reason: reason.into() }
     }
-    pub fn bad_arg(arg: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::BadArgument { arg: arg.into(), reason: reason.into() }
+    pub fn bad_param(param: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::BadParam { param: param.into(), reason: reason.into() }
     }
 }

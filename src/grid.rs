@@ -30,19 +30,22 @@ impl ViewGrid {
         region: Option<Aabb>,
         dims: Option<[u32; 3]>,
         cell_size: Option<f32>,
-    ) -> Result<ViewGrid, String> {
+    ) -> crate::Result<ViewGrid> {
+        use crate::Error;
         let region = region.or(scene_grid.map(|g| g.region)).unwrap_or_else(|| {
             let y = bounds.min.y;
             Aabb::new(Vec3::new(bounds.min.x, y + 1.5, bounds.min.z), Vec3::new(bounds.max.x, y + 2.0, bounds.max.z))
         });
         let e = region.extent();
+        let dims_given = dims.is_some();
         let dims = match (dims, cell_size) {
             (Some(d), _) => d,
             (None, Some(s)) if s > 0.0 && s.is_finite() => {
-                let n = |x: f32| ((x / s).ceil() as u32).max(1);
+                // f32 → u32 saturates: a tiny cell size gives u32::MAX cells, refused below.
+                let n = |x: f32| ((f64::from(x) / f64::from(s)).ceil() as u32).max(1);
                 [n(e.x), 1, n(e.z)]
             }
-            (None, Some(s)) => return Err(format!("--cell-size {s} must be a positive length")),
+            (None, Some(s)) => return Err(Error::bad_param("cell_size", format!("{s} must be a positive length"))),
             (None, None) => match scene_grid {
                 Some(g) if g.region == region => g.dims,
                 _ => {
@@ -53,7 +56,7 @@ impl ViewGrid {
             },
         };
         let g = ViewGrid::new(region, dims);
-        g.check()?;
+        g.check().map_err(|r| Error::bad_param(if dims_given { "grid" } else { "region" }, r))?;
         Ok(g)
     }
 

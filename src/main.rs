@@ -1,5 +1,7 @@
 //! The `hdov` command: a thin face over the library (see `cli`).
 
+mod cli;
+
 fn main() -> std::process::ExitCode {
-    hdov::cli::main()
+    cli::main()
 }

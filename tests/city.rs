@@ -11,7 +11,7 @@ use hdov::geom::Aabb;
 use hdov::scene::{Mesh, Scene};
 
 fn city(scale: CityScale, seed: u64) -> Scene {
-    generate(&CityParams { seed, scale, ..CityParams::default() })
+    generate(&CityParams { seed, scale, ..CityParams::default() }).unwrap()
 }
 
 fn is_detail(scene: &Scene, object: usize) -> bool {
@@ -114,11 +114,11 @@ fn object_counts_per_scale() {
 
 #[test]
 fn blocks_override_the_scale() {
-    let one = generate(&CityParams { blocks: Some([1, 1]), ..CityParams::default() });
-    let zero = generate(&CityParams { blocks: Some([0, 0]), ..CityParams::default() });
+    let one = generate(&CityParams { blocks: Some([1, 1]), ..CityParams::default() }).unwrap();
+    let zero = generate(&CityParams { blocks: Some([0, 0]), ..CityParams::default() }).unwrap();
     assert_eq!(zero, one, "zero blocks count as one");
     one.check().unwrap();
-    let wide = generate(&CityParams { blocks: Some([6, 2]), scale: CityScale::Tiny, ..CityParams::default() });
+    let wide = generate(&CityParams { blocks: Some([6, 2]), scale: CityScale::Tiny, ..CityParams::default() }).unwrap();
     let tiny = city(CityScale::Tiny, 0);
     let one_details = (0..one.objects.len()).filter(|&o| is_detail(&one, o)).count();
     assert_eq!(one_details, 4, "a one-block city has statues at its four street corners");
@@ -255,7 +255,7 @@ fn a_given_detail_model_is_normalised_and_used() {
         positions: vec![[0.0, -100.0, 0.0], [100.0, -100.0, 0.0], [0.0, -100.0, 100.0], [0.0, 100.0, 0.0]],
         indices: vec![0, 1, 2, 0, 3, 1, 0, 2, 3, 1, 3, 2],
     };
-    let scene = generate(&CityParams { detail_model: Some(model), scale: CityScale::Tiny, ..CityParams::default() });
+    let scene = generate(&CityParams { detail_model: Some(model), scale: CityScale::Tiny, ..CityParams::default() }).unwrap();
     let detail = &scene.meshes[0].mesh;
     assert_eq!(detail.triangle_count(), 4);
     let b = detail.bounds();
@@ -264,6 +264,6 @@ fn a_given_detail_model_is_normalised_and_used() {
     assert!(scene.object_bounds(instance).min.y.abs() < 1e-3);
     // An empty model falls back to the procedural figure.
     let empty =
-        generate(&CityParams { detail_model: Some(Mesh::default()), scale: CityScale::Tiny, ..CityParams::default() });
+        generate(&CityParams { detail_model: Some(Mesh::default()), scale: CityScale::Tiny, ..CityParams::default() }).unwrap();
     assert!(empty.meshes[0].mesh.triangle_count() > 60_000);
 }

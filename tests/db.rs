@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::{Mat4, Vec3};
 use hdov::scene::{BaseMesh, Object, Scene};
 
-use hdov::db::{self, BuildParams, Database};
+use hdov::{BuildParams, Database};
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
 
@@ -38,9 +38,9 @@ fn town(n: usize) -> Scene {
     scene
 }
 
-fn build(dir: &Path, params: &BuildParams) -> hdov::db::build::BuildReport {
+fn build(dir: &Path, params: &BuildParams) -> hdov::BuildReport {
     let scene = town(8);
-    db::build::build(&scene, dir, params, false, &Progress::hidden()).unwrap()
+    hdov::build(&scene, dir, params, false, &Progress::hidden()).unwrap()
 }
 
 #[test]
@@ -62,17 +62,17 @@ fn tree_pages_and_lods_round_trip() {
     }
     assert_eq!(db.tree_pages_read(), tree.nodes.len() as u64, "every node read is one counted page");
     // Instanced geometry is stored once: one chain per base mesh, not per object.
-    assert_eq!(db.catalog.mesh_lods.len(), scene.meshes.len());
-    assert!(db.catalog.objects.len() > scene.meshes.len());
-    let ball = &db.catalog.mesh_lods[0];
+    assert_eq!(db.catalog().mesh_lods.len(), scene.meshes.len());
+    assert!(db.catalog().objects.len() > scene.meshes.len());
+    let ball = &db.catalog().mesh_lods[0];
     assert_eq!(ball[0].faces as usize, scene.meshes[0].mesh.triangle_count());
     for w in ball.windows(2) {
         assert!(w[1].faces < w[0].faces);
     }
-    for lod in ball.iter().chain(db.catalog.node_lods.iter().flatten()) {
+    for lod in ball.iter().chain(db.catalog().node_lods.iter().flatten()) {
         assert_eq!(db.lod_mesh(lod).unwrap().triangle_count(), lod.faces as usize);
     }
-    let m = &db.manifest;
+    let m = db.manifest();
     assert_eq!(m.counts.objects as usize, scene.objects.len());
     assert_eq!(m.counts.triangles, scene.triangle_count());
 }
@@ -83,11 +83,11 @@ fn existing_database_is_kept_without_force_and_replaced_with_it() {
     let dir = tmp.path().join("db");
     build(&dir, &BuildParams::default());
     let scene = town(3);
-    let err = db::build::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
+    let err = hdov::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
     assert!(err.to_string().contains("--force"), "{err}");
-    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, town(8).objects.len());
-    db::build::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
-    assert_eq!(Database::open(&dir).unwrap().manifest.counts.objects as usize, scene.objects.len());
+    assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, town(8).objects.len());
+    hdov::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
+    assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, scene.objects.len());
     // No temporary directory is left beside the target.
     let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names.len(), 1, "{names:?}");
@@ -113,7 +113,7 @@ fn open_and_read_all(dir: &Path) -> hdov::Result<()> {
     for id in 0..db.node_count() {
         db.node(id)?;
     }
-    for lod in db.catalog.mesh_lods.iter().chain(&db.catalog.node_lods).flatten() {
+    for lod in db.catalog().mesh_lods.iter().chain(&db.catalog().node_lods).flatten() {
         db.lod_mesh(lod)?;
     }
     Ok(())

@@ -7,7 +7,7 @@ use hdov::lod::{LodLevel, LodParams, leaf_chain};
 use hdov::scene::Scene;
 
 fn city(scale: CityScale) -> (Scene, Vec<Vec<LodLevel>>) {
-    let scene = generate(&CityParams { scale, ..Default::default() });
+    let scene = generate(&CityParams { scale, ..Default::default() }).unwrap();
     let lods = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
     (scene, lods)
 }
@@ -63,7 +63,7 @@ fn zero_tolerance_is_full_detail() {
 fn bad_lod_options_are_refused() {
     let (scene, lods) = city(CityScale::Tiny);
     let short = GpuOptions { lods: Some(&lods[1..]), ..Default::default() };
-    assert!(matches!(GpuBackend::with_options(&scene, 8, &short), Err(hdov::Error::BadArgument { .. })));
+    assert!(matches!(GpuBackend::with_options(&scene, 8, &short), Err(hdov::Error::BadParam { .. })));
     let negative = GpuOptions { lods: Some(&lods), lod_tolerance_texels: -1.0, ..Default::default() };
-    assert!(matches!(GpuBackend::with_options(&scene, 8, &negative), Err(hdov::Error::BadArgument { .. })));
+    assert!(matches!(GpuBackend::with_options(&scene, 8, &negative), Err(hdov::Error::BadParam { .. })));
 }

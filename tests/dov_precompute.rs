@@ -100,7 +100,7 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
     let mut merged: Vec<(u32, CellDov)> = Vec::new();
     let mut measured = 0;
     for i in 0..3 {
-        let shard = Shard::parse(&format!("{i}/3")).unwrap();
+        let shard = format!("{i}/3").parse::<Shard>().unwrap();
         let part = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, shard, &mut |_, _| {}).unwrap();
         measured += part.points_measured;
         merged.extend(part.cells);
@@ -119,7 +119,7 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
             .points_measured;
     }
     assert!(measured < 8 * grid.cell_count(), "shards without the neighbour test measure {measured} corners");
-    assert!(Shard::parse("3/3").is_err() && Shard::parse("1-3").is_err() && Shard::parse("0/0").is_err());
+    assert!("3/3".parse::<Shard>().is_err() && "1-3".parse::<Shard>().is_err() && "0/0".parse::<Shard>().is_err());
 }
 
 #[test]

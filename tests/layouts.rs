@@ -2,7 +2,7 @@
 //! V-entries, and those are exactly what the DoV precompute produced.
 
 use hdov::city::{CityParams, CityScale};
-use hdov::db::{self, BuildParams, Database, VisibilityParams};
+use hdov::{BuildParams, Database, VisibilityParams};
 use hdov::dov::BackendKind;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::progress::Progress;
@@ -19,7 +19,7 @@ struct Fixture {
 }
 
 fn fixture() -> Fixture {
-    let scene = hdov::city::generate(&CityParams { seed: 3, scale: CityScale::Tiny, ..Default::default() });
+    let scene = hdov::city::generate(&CityParams { seed: 3, scale: CityScale::Tiny, ..Default::default() }).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("db");
     let params = BuildParams {
@@ -27,9 +27,9 @@ fn fixture() -> Fixture {
         visibility: Some(VisibilityParams { resolution: RESOLUTION, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
-    db::build::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
+    hdov::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
     // The same measurement, independently: the tree is deterministic, so are its V-pages.
-    let tree = RTree::build(&scene.all_object_bounds(), db::tree_page::fanout(512), params.tree);
+    let tree = RTree::build(&scene.all_object_bounds(), hdov::db::tree_page::fanout(512), params.tree);
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let mut backend = hdov::dov::CpuBackend::new(&scene, RESOLUTION).unwrap();
@@ -44,7 +44,7 @@ fn fixture() -> Fixture {
         &mut |_, _| {},
     )
     .unwrap();
-    let expected = db::visibility::vdata_from_cells(&tree, grid.cell_count() as u32, &dov.cells);
+    let expected = hdov::build::vpages::vdata_from_cells(&tree, grid.cell_count() as u32, &dov.cells);
     Fixture { _tmp: tmp, db: Database::open(&dir).unwrap(), expected }
 }
 

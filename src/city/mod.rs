@@ -121,10 +121,14 @@ impl FromStr for CityScale {
 
     fn from_str(s: &str) -> Result<Self, Error> {
         CityScale::ALL.into_iter().find(|scale| scale.name().eq_ignore_ascii_case(s)).ok_or_else(|| {
-            Error::bad_arg("--scale", format!("unknown scale '{s}': expected tiny, small, default or large"))
+            Error::bad_param("scale", format!("unknown scale '{s}': expected tiny, small, default or large"))
         })
     }
 }
+
+/// Most blocks along one axis: 256 × 256 blocks is about 70 times the large city (30 × 30
+/// blocks, 37 M triangles), past what one machine builds a database for.
+pub const MAX_BLOCKS: u32 = 256;
 
 /// What to generate.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -145,7 +149,8 @@ pub struct CityParams {
 /// Cost: linear in the buildings (about 0.1 ms each on one core, in parallel) plus the detail
 /// model: `default` takes ~0.4 s and 37 MB of meshes, `large` ~2 s and ~200 MB (release build,
 /// two cores).
-pub fn generate(params: &CityParams) -> Scene {
+pub fn generate(params: &CityParams) -> Result<Scene, Error> {
+    params.check()?;
     let blocks = params.blocks.unwrap_or(params.scale.blocks()).map(|b| b.max(1));
     let plan = layout::plan_city(params.seed, blocks);
     let detail = params.detail_model.as_ref().and_then(normalise_detail).unwrap_or_else(procedural_detail);
@@ -171,7 +176,19 @@ pub fn generate(params: &CityParams) -> Scene {
         objects.push(Object { name: format!("detail_{index:04}"), mesh: 0, transform });
     }
     let grid = Some(view_grid(plan.extent, params.scale));
-    Scene { meshes, objects, grid }
+    Ok(Scene { meshes, objects, grid })
+}
+
+impl CityParams {
+    /// Checks the block counts against [`MAX_BLOCKS`]; costs nothing.
+    pub fn check(&self) -> Result<(), Error> {
+        match self.blocks {
+            Some(b) if b.iter().any(|&n| n > MAX_BLOCKS) => {
+                Err(Error::bad_param("blocks", format!("{}x{} is more than {MAX_BLOCKS} along an axis", b[0], b[1])))
+            }
+            _ => Ok(()),
+        }
+    }
 }
 
 /// One mesh per planned building, generated in parallel; each draws from its own stream, so

@@ -6,21 +6,22 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 
 use super::args::{parse_dims, parse_region};
-use crate::city::{CityParams, CityScale};
-use crate::db::build::BuildReport;
-use crate::db::{self, BuildParams, Database, VisibilityParams};
-use crate::dov::BackendKind;
-use crate::error::{Error, Result};
-use crate::geom::Aabb;
-use crate::grid::ViewGrid;
-use crate::progress::Progress;
-use crate::rtree::TreeAlgorithm;
-use crate::scene::Scene;
+use hdov::city::{CityParams, CityScale};
+use hdov::db::Manifest;
+use hdov::dov::BackendKind;
+use hdov::dov::precompute::{FloorTest, Shard};
+use hdov::error::{Error, Result};
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
+use hdov::progress::Progress;
+use hdov::rtree::TreeAlgorithm;
+use hdov::{BuildParams, BuildReport, Database, Info, Scene, VisibilityParams};
 use hdov_storage::{DovCodec, LayoutKind};
 
 #[derive(Args)]
 pub struct DemoArgs {
-    /// Directory for the demo's scene and database (replaced if it exists).
+    /// Directory for the demo's scene and database. An earlier demo's output there is
+    /// replaced; a directory holding anything else is refused.
     #[arg(long, default_value = "hdov-demo")]
     out: PathBuf,
     /// Print one JSON document instead of the summary.
@@ -49,6 +50,9 @@ pub struct CityArgs {
     /// A real mesh (OBJ) to instance as the dense detail model, e.g. the Stanford bunny.
     #[arg(long)]
     detail_model: Option<PathBuf>,
+    /// Replace DIR/city.json and DIR/city.meshes if they are an earlier generated scene.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
@@ -59,7 +63,7 @@ pub struct BuildArgs {
     #[arg(long)]
     out: PathBuf,
     /// Viewing region X0,Y0,Z0,X1,Y1,Z1 (default: the scene's grid, or its footprint at eye height).
-    #[arg(long, value_parser = parse_region)]
+    #[arg(long, value_parser = parse_region, allow_hyphen_values = true)]
     region: Option<Aabb>,
     /// Cells along x, y (height layers) and z, e.g. 16x1x16.
     #[arg(long, value_parser = parse_dims::<3>, conflicts_with = "cell_size")]
@@ -75,7 +79,7 @@ pub struct BuildArgs {
     tree: TreeAlgorithm,
     #[command(flatten)]
     visibility: VisibilityArgs,
-    /// Replace an existing database at --out.
+    /// Replace an existing database (or empty directory) at --out; anything else is refused.
     #[arg(long)]
     force: bool,
     #[arg(long)]
@@ -95,8 +99,8 @@ pub struct VisibilityArgs {
     #[arg(long, default_value = "auto")]
     backend: BackendKind,
     /// Compute only part I of N of the cells (join the parts with `hdov merge`).
-    #[arg(long, value_parser = parse_shard)]
-    shard: Option<[u32; 2]>,
+    #[arg(long)]
+    shard: Option<Shard>,
     /// V-page layouts to write, comma-separated.
     #[arg(long, default_value = "horizontal,vertical,indexed-vertical", value_delimiter = ',')]
     layouts: Vec<LayoutKind>,
@@ -106,10 +110,10 @@ pub struct VisibilityArgs {
     /// GPU backend: draw an object at a coarser LOD when its simplification error, seen from the
     /// sample point, is below this many texels (0 = always full detail). 0.05 keeps every
     /// object's DoV within 0.5 % + 2 texels of full detail (docs/dov.md); the CPU backend ignores it.
-    #[arg(long, default_value_t = crate::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS)]
+    #[arg(long, default_value_t = hdov::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS)]
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
-    /// neighbours (a neighbouring cell's corner sees it), or none.
+    /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
     #[arg(long, default_value = "box,neighbours", value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
@@ -118,17 +122,23 @@ pub struct VisibilityArgs {
 }
 
 impl VisibilityArgs {
-    fn params(&self) -> Option<VisibilityParams> {
-        (!self.no_visibility).then(|| VisibilityParams {
+    fn params(&self) -> Result<Option<VisibilityParams>> {
+        if self.no_visibility {
+            return Ok(None);
+        }
+        let floor = self.zero_dov_floor.iter().filter(|t| t.as_str() != "none");
+        Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
             interior_samples: self.samples,
-            layouts: self.layouts.iter().map(|k| k.name().to_string()).collect(),
-            dov_codec: self.dov_codec.to_string(),
+            layouts: self.layouts.clone(),
+            dov_codec: self.dov_codec,
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
-            zero_dov_floor: self.zero_dov_floor.iter().filter(|t| t.as_str() != "none").cloned().collect(),
-        })
+            zero_dov_floor: floor
+                .map(|t| t.parse::<FloorTest>().map_err(|r| Error::bad_param("zero_dov_floor", r)))
+                .collect::<Result<_>>()?,
+        }))
     }
 }
 
@@ -139,11 +149,6 @@ fn parse_samples(s: &str) -> std::result::Result<u32, String> {
     s.parse().map_err(|_| format!("'{s}' is neither 'corners' nor a number of interior points"))
 }
 
-fn parse_shard(s: &str) -> std::result::Result<[u32; 2], String> {
-    let sh = crate::dov::precompute::Shard::parse(s).map_err(|e| e.to_string())?;
-    Ok([sh.index, sh.count])
-}
-
 #[derive(Args)]
 pub struct MergeArgs {
     /// The shard databases, all N of them.
@@ -151,6 +156,7 @@ pub struct MergeArgs {
     shards: Vec<PathBuf>,
     #[arg(long)]
     out: PathBuf,
+    /// Replace an existing database (or empty directory) at --out; anything else is refused.
     #[arg(long)]
     force: bool,
 }
@@ -159,7 +165,7 @@ pub struct MergeArgs {
 pub struct DovArgs {
     scene: PathBuf,
     /// The viewpoint X,Y,Z.
-    #[arg(long, value_parser = super::args::parse_vec3)]
+    #[arg(long, value_parser = super::args::parse_vec3, allow_hyphen_values = true)]
     at: glam::Vec3,
     #[arg(long, default_value_t = 256)]
     resolution: u32,
@@ -178,7 +184,9 @@ pub struct InfoArgs {
 
 pub fn generate(cmd: GenerateCommand) -> Result<()> {
     let GenerateCommand::City(a) = cmd;
-    let path = generate_city(&a.out, a.seed, a.scale, a.blocks, a.detail_model.as_deref())?;
+    let city = CityParams { seed: a.seed, blocks: a.blocks, scale: a.scale, detail_model: None };
+    city.check()?;
+    let path = generate_city(&a.out, city, a.detail_model.as_deref(), a.force)?;
     let (scene, _) = Scene::load(&path)?;
     println!(
         "{}: {} objects, {} base meshes, {} triangles ({} stored)",
@@ -191,41 +199,38 @@ pub fn generate(cmd: GenerateCommand) -> Result<()> {
     Ok(())
 }
 
-fn generate_city(
-    out: &Path,
-    seed: u64,
-    scale: CityScale,
-    blocks: Option<[u32; 2]>,
-    detail: Option<&Path>,
-) -> Result<PathBuf> {
-    let detail_model = match detail {
+/// Generates a city into `out/city.json` (+ `city.meshes`); `replace` lets it overwrite an
+/// earlier generated scene there, never other files.
+fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replace: bool) -> Result<PathBuf> {
+    city.detail_model = match detail {
         Some(p) => {
             let (s, _) = Scene::load(p)?;
             let parts: Vec<_> = (0..s.objects.len())
-                .map(|i| crate::lod::transformed(s.object_mesh(i), &s.objects[i].transform))
+                .map(|i| hdov::lod::transformed(s.object_mesh(i), &s.objects[i].transform))
                 .collect();
-            Some(crate::scene::Mesh::merged(&parts))
+            Some(hdov::scene::Mesh::merged(&parts))
         }
         None => None,
     };
-    let scene = crate::city::generate(&CityParams { seed, blocks, scale, detail_model });
+    let scene = hdov::city::generate(&city)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let path = out.join("city.json");
-    crate::scene::manifest::write(&scene, &path)?;
+    hdov::scene::manifest::write(&scene, &path, replace)?;
     Ok(path)
 }
 
 pub fn build(a: BuildArgs) -> Result<()> {
+    let params =
+        BuildParams { page_size: a.page_size, tree: a.tree, visibility: a.visibility.params()?, ..Default::default() };
+    // Every argument that does not need the scene is checked before the scene is read.
+    params.check(None)?;
     let (mut scene, warnings) = Scene::load(&a.scene)?;
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    let grid = ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)
-        .map_err(|r| Error::bad_arg("--grid", r))?;
-    scene.grid = Some(grid);
-    let params =
-        BuildParams { page_size: a.page_size, tree: a.tree, visibility: a.visibility.params(), ..Default::default() };
-    let report = db::build::build(&scene, &a.out, &params, a.force, &Progress::for_terminal(a.json))?;
+    scene.grid = Some(ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)?);
+    let report = hdov::build(&scene, &a.out, &params, a.force, &Progress::for_terminal(a.json))?;
+    report_cleaned(&report.cleaned);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).expect("serialisable"));
     } else {
@@ -256,7 +261,14 @@ fn print_build(out: &Path, r: &BuildReport) {
     println!("  time: tree {:.2} s, LODs {:.2} s, write {:.2} s", r.tree_seconds, r.lod_seconds, r.write_seconds);
 }
 
-fn print_visibility(m: &db::Manifest) {
+/// Says which leftovers of dead builds were removed (on stderr: stdout may be JSON).
+fn report_cleaned(cleaned: &[PathBuf]) {
+    for p in cleaned {
+        eprintln!("note: removed {}, left by a build that did not finish", p.display());
+    }
+}
+
+fn print_visibility(m: &Manifest) {
     let (Some(v), Some(g), Some(p)) = (&m.visibility, m.grid, m.build.visibility.as_ref()) else {
         println!("  visibility: none");
         return;
@@ -280,97 +292,83 @@ fn print_visibility(m: &db::Manifest) {
 
 pub fn info(a: InfoArgs) -> Result<()> {
     let db = Database::open(&a.db)?;
-    let m = &db.manifest;
-    let c = &m.counts;
-    let mut layouts = serde_json::Map::new();
-    for kind in db.layouts() {
-        let s = db.layout(kind, hdov_storage::ReadMode::Mmap)?.summary();
-        let sizes = m.visibility.iter().flat_map(|v| &v.layouts).find(|l| l.name == kind.name());
-        layouts.insert(
-            kind.name().into(),
-            json!({
-                "bytes": s.bytes,
-                "vpage_bytes": sizes.map(|l| l.vpage_bytes),
-                "index_bytes": sizes.map(|l| l.index_bytes),
-                "dov_codec": s.dov.to_string(),
-                "visible_nodes_per_cell": {"mean": s.visible_nodes_mean, "max": s.visible_nodes_max},
-                // Storage cost per visible (node, cell) pair: what each layout pays for visibility.
-                "bytes_per_visible_vpage": s.bytes as f64 / (s.visible_nodes_mean * s.cell_count as f64).max(1.0),
-                "flip_pages": {"mean": s.flip_pages_mean, "max": s.flip_pages_max},
-            }),
-        );
-    }
+    let info = db.info()?;
     if a.json {
-        let doc = json!({
-            "objects": c.objects,
-            "triangles": c.triangles,
-            "stored_triangles": c.stored_triangles,
-            "base_meshes": c.base_meshes,
-            "nodes": c.nodes,
-            "cells": c.cells,
-            "lod_triangles": c.lod_triangles,
-            "grid": m.grid.map(|g| json!({"region": g.region.to_array(), "dims": g.dims})),
-            "resolution": m.build.visibility.as_ref().map(|v| v.resolution),
-            "visibility": m.visibility,
-            "layouts": layouts,
-            "tree": m.tree,
-            "build": m.build,
-            "files": m.files,
-            "format_version": m.format_version,
-        });
-        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
+        println!("{}", serde_json::to_string_pretty(&info).expect("serialisable"));
         return Ok(());
     }
-    println!("{} (format v{}, {})", a.db.display(), m.format_version, m.created_by);
+    print_info(&a.db, &info, db.manifest());
+    Ok(())
+}
+
+fn print_info(path: &Path, info: &Info, m: &Manifest) {
+    println!("{} (format v{}, {})", path.display(), info.format_version, info.created_by);
     println!(
         "  objects {} ({} base meshes), triangles {} ({} stored), LOD triangles {}",
-        c.objects, c.base_meshes, c.triangles, c.stored_triangles, c.lod_triangles
+        info.objects, info.base_meshes, info.triangles, info.stored_triangles, info.lod_triangles
     );
-    let t = &m.tree;
+    let t = &info.tree;
     println!(
         "  tree {}: {} nodes, {} leaves, height {}, fan-out {}, fill {:.0} %",
-        m.build.tree,
+        info.build.tree,
         t.nodes,
         t.leaves,
         t.height,
         t.max_entries,
         t.fill_factor * 100.0
     );
-    if let Some(g) = m.grid {
-        println!(
-            "  grid {}x{}x{} = {} cells over {:?}",
-            g.dims[0],
-            g.dims[1],
-            g.dims[2],
-            g.cell_count(),
-            g.region.to_array()
-        );
+    if let Some(g) = &info.grid {
+        let [nx, ny, nz] = g.dims;
+        println!("  grid {nx}x{ny}x{nz} = {} cells over {:?}", info.cells, g.region);
     }
-    for f in &m.files {
+    for f in &info.files {
         println!("  {:<16} {:>12} bytes", f.name, f.bytes);
     }
     print_visibility(m);
-    for (name, l) in &layouts {
+    for (name, l) in &info.layouts {
         println!(
             "    {name:<17} visible nodes per cell {:.1} (max {}), cell flip reads {:.1} pages (max {})",
-            l["visible_nodes_per_cell"]["mean"].as_f64().unwrap_or(0.0),
-            l["visible_nodes_per_cell"]["max"],
-            l["flip_pages"]["mean"].as_f64().unwrap_or(0.0),
-            l["flip_pages"]["max"]
+            l.visible_nodes_per_cell.mean, l.visible_nodes_per_cell.max, l.flip_pages.mean, l.flip_pages.max
         );
     }
-    Ok(())
 }
 
 /// Resolution of the demo's DoV measurement: fine enough for the city's sphere-of-directions
 /// floor (1.9e-5) and measured in about a minute on 2 CPU cores.
 const DEMO_RESOLUTION: u32 = 128;
 
+/// What a demo directory holds; anything else in it makes the demo refuse the directory.
+const DEMO_FILES: [&str; 3] = ["city.json", "city.meshes", "city.hdov"];
+
+/// Refuses `out` unless it is missing, empty or holds nothing but an earlier demo's files
+/// (each of which is replaced only if hdov wrote it).
+fn check_demo_dir(out: &Path) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return match std::fs::symlink_metadata(out) {
+            Ok(_) => Err(Error::bad_file(out, "not a directory; choose another --out")),
+            Err(_) => Ok(()),
+        };
+    };
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(out, e))?;
+        let name = entry.file_name();
+        if !DEMO_FILES.iter().any(|f| name == *f) {
+            return Err(Error::bad_file(
+                out,
+                format!("holds '{}', which the demo did not write; choose another --out", name.to_string_lossy()),
+            ));
+        }
+    }
+    Ok(())
+}
+
 pub fn demo(a: DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
-    let scene_path = generate_city(&a.out, 1, CityScale::Default, None, None)?;
+    check_demo_dir(&a.out)?;
+    let city = CityParams { seed: 1, scale: CityScale::Default, ..Default::default() };
+    let scene_path = generate_city(&a.out, city, None, true)?;
     let (scene, _) = Scene::load(&scene_path)?;
-    let db_path = a.out.join("city.hdov");
+    let db_path = a.out.join(DEMO_FILES[2]);
     let params = BuildParams {
         visibility: Some(VisibilityParams { resolution: DEMO_RESOLUTION, ..Default::default() }),
         ..Default::default()
@@ -386,7 +384,8 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             g.cell_count()
         );
     }
-    let report = db::build::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
+    let report = hdov::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
+    report_cleaned(&report.cleaned);
     if a.json {
         let doc = json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()});
         println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
@@ -399,15 +398,9 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 }
 
 pub fn merge(a: MergeArgs) -> Result<()> {
-    let m = db::merge::merge(&a.shards, &a.out, a.force)?;
-    let v = m.visibility.as_ref().expect("a merged database has visibility");
-    println!(
-        "{}: merged {} shards, {} cells, {} sample points",
-        a.out.display(),
-        a.shards.len(),
-        v.cells_computed,
-        v.sample_points
-    );
+    let m = hdov::merge(&a.shards, &a.out, a.force)?;
+    let (cells, points) = m.visibility.as_ref().map_or((0, 0), |v| (v.cells_computed, v.sample_points));
+    println!("{}: merged {} shards, {cells} cells, {points} sample points", a.out.display(), a.shards.len());
     Ok(())
 }
 
@@ -416,7 +409,7 @@ pub fn dov(a: DovArgs) -> Result<()> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    let mut backend = crate::dov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
+    let mut backend = hdov::dov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
     let point = backend.measure(a.at)?;
     let mut objects = point.objects.clone();
     objects.sort_by(|x, y| y.1.total_cmp(&x.1));

@@ -8,8 +8,7 @@ mod commands;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-
-pub use args::{parse_dims, parse_region, parse_vec3};
+use hdov::Error;
 
 #[derive(Parser)]
 #[command(name = "hdov", version, about = "A disk-resident visibility database for large 3D scenes (HDoV-tree)")]
@@ -36,7 +35,18 @@ enum Command {
 }
 
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            // --help and --version: clap's own text on stdout.
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            eprintln!("error: {}", clap_one_line(&e));
+            return ExitCode::from(2);
+        }
+    };
     let result = match cli.command {
         Command::Demo(a) => commands::demo(a),
         Command::Generate(g) => commands::generate(g),
@@ -48,8 +58,52 @@ pub fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", user_message(&e));
             ExitCode::from(2)
         }
+    }
+}
+
+/// clap's error as one line: its first line without the `error: ` prefix and styling, plus the
+/// usage hint clap would have printed below it.
+fn clap_one_line(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    let first = text.lines().next().unwrap_or("invalid arguments").trim();
+    let first = first.strip_prefix("error: ").unwrap_or(first);
+    format!("{first} (see hdov --help)")
+}
+
+/// The library's error in the command's words: parameters become the flags that set them, and
+/// a refused target says how to replace it.
+fn user_message(e: &Error) -> String {
+    use hdov_storage::Error as S;
+    match e {
+        Error::BadParam { param, reason } => format!("{}: {reason}", flag_of(param)),
+        Error::Storage(S::Exists { .. }) => format!("{e}; pass --force to replace it"),
+        _ => e.to_string(),
+    }
+}
+
+/// The flag that sets a library parameter (the name itself when no flag does, e.g. a file).
+fn flag_of(param: &str) -> &str {
+    match param {
+        "page_size" => "--page-size",
+        "resolution" => "--resolution",
+        "interior_samples" => "--samples",
+        "layouts" => "--layouts",
+        "layout" => "--layout",
+        "dov_codec" => "--dov-codec",
+        "shard" => "--shard",
+        "zero_dov_floor" => "--zero-dov-floor",
+        "lod_draw_tolerance" => "--lod-draw-tolerance",
+        "backend" => "--backend",
+        "grid" => "--grid",
+        "region" => "--region",
+        "cell_size" => "--cell-size",
+        "blocks" => "--blocks",
+        "scale" => "--scale",
+        "shards" => "SHARD_DB",
+        "scene" => "SCENE",
+        other => other,
     }
 }

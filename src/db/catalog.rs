@@ -43,8 +43,9 @@ impl Catalog {
         &self.mesh_lods[self.objects[object as usize].mesh as usize]
     }
 
-    /// Checks internal consistency; returns the first violation.
-    pub fn check(&self, nodes: usize) -> Result<(), String> {
+    /// Checks internal consistency, and that every LOD reference lies inside a geometry file of
+    /// `geometry_len` bytes; returns the first violation.
+    pub fn check(&self, nodes: usize, geometry_len: u64) -> Result<(), String> {
         if self.node_lods.len() != nodes {
             return Err(format!("{} node LOD chains for {nodes} nodes", self.node_lods.len()));
         }
@@ -54,8 +55,19 @@ impl Catalog {
         if let Some(o) = self.objects.iter().find(|o| o.mesh as usize >= self.mesh_lods.len()) {
             return Err(format!("object '{}' refers to mesh {} of {}", o.name, o.mesh, self.mesh_lods.len()));
         }
-        if self.mesh_lods.iter().chain(&self.node_lods).any(|c| c.is_empty()) {
-            return Err("an empty LOD chain".into());
+        if let Some(o) = self.objects.iter().find(|o| o.transform.iter().any(|x| !x.is_finite())) {
+            return Err(format!("object '{}' has a non-finite transform", o.name));
+        }
+        for chain in self.mesh_lods.iter().chain(&self.node_lods) {
+            if chain.is_empty() {
+                return Err("an empty LOD chain".into());
+            }
+            if let Some(l) = chain.iter().find(|l| l.offset.checked_add(u64::from(l.len)).is_none_or(|e| e > geometry_len)) {
+                return Err(format!("LOD at byte {} (+{}) lies outside geometry.blob ({geometry_len} bytes)", l.offset, l.len));
+            }
+            if chain.windows(2).any(|w| w[1].faces > w[0].faces) || chain[0].faces == 0 {
+                return Err("a LOD chain that is not finest first or has an empty level".into());
+            }
         }
         Ok(())
     }

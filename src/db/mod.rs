@@ -6,28 +6,22 @@
 //! DB/geometry.blob    every LOD level as a bincode mesh record (storage blob file, kind GEOM)
 //! DB/catalog.blob     objects and LOD references (storage blob file, kind CATL)
 //! ```
-//! A database is written by [`build::build`] into a temporary directory and renamed into place
+//! A database is written by [`crate::build()`] into a temporary directory and renamed into place
 //! (see `hdov_storage::DirTxn`); it is immutable afterwards. `docs/format.md` gives every byte.
 
-pub mod build;
 pub mod catalog;
-pub mod merge;
+pub mod info;
+pub mod manifest;
 pub mod tree_page;
-pub mod visibility;
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
-
-use crate::dov::BackendKind;
-use crate::dov::precompute::{FloorTest, Shard};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
-use crate::lod::LodParams;
-use crate::rtree::{TreeAlgorithm, TreeStats};
 use crate::scene::Mesh;
 use catalog::{Catalog, LodRef};
-use hdov_storage::{BlobFile, DovCodec, LayoutKind, LayoutReader, PageFile, ReadMode};
+use hdov_storage::{BlobFile, LayoutKind, LayoutReader, PageFile, ReadMode};
+pub use manifest::{Counts, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
 use tree_page::NodePage;
 
 pub const FORMAT_VERSION: u32 = 1;
@@ -39,184 +33,16 @@ pub const TREE_KIND: [u8; 4] = *b"TREE";
 pub const GEOMETRY_KIND: [u8; 4] = *b"GEOM";
 pub const CATALOG_KIND: [u8; 4] = *b"CATL";
 
-/// How a database was built.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct BuildParams {
-    /// Bytes per page of the tree file and of the V-page layouts.
-    pub page_size: u32,
-    pub tree: TreeAlgorithm,
-    pub lod: LodParams,
-    /// `None` builds tree and LODs only.
-    pub visibility: Option<VisibilityParams>,
-}
-
-impl Default for BuildParams {
-    fn default() -> Self {
-        Self {
-            page_size: 4096,
-            tree: TreeAlgorithm::Str,
-            lod: LodParams::default(),
-            visibility: Some(VisibilityParams::default()),
-        }
-    }
-}
-
-/// How DoV is measured and stored.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct VisibilityParams {
-    /// Texels per cube-face edge (R).
-    pub resolution: u32,
-    pub backend: BackendKind,
-    /// Stratified interior sample points per cell, besides the 8 shared corners.
-    pub interior_samples: u32,
-    /// Layouts to write: `horizontal`, `vertical`, `indexed-vertical`.
-    pub layouts: Vec<String>,
-    /// How V-entries store DoV: `f32` or `log-u16`.
-    pub dov_codec: String,
-    /// `[I, N]`: this database holds part I of N of the grid's cells.
-    pub shard: Option<[u32; 2]>,
-    /// Visible-zero-DoV tests (thesis §5.5.2) that give unseen objects the one-texel floor:
-    /// `box` (the object's box meets the cell), `neighbours` (a neighbouring cell's corner sees
-    /// it). Empty: no floor.
-    #[serde(default)]
-    pub zero_dov_floor: Vec<String>,
-    /// GPU backend: texels of LOD error below which an object is drawn coarser (0 = off).
-    #[serde(default)]
-    pub lod_draw_tolerance: f32,
-}
-
-impl Default for VisibilityParams {
-    fn default() -> Self {
-        Self {
-            resolution: 128,
-            backend: BackendKind::Auto,
-            interior_samples: 0,
-            layouts: LayoutKind::ALL.iter().map(|k| k.name().to_string()).collect(),
-            dov_codec: DovCodec::F32.to_string(),
-            shard: None,
-            zero_dov_floor: vec!["box".into(), "neighbours".into()],
-            lod_draw_tolerance: crate::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS,
-        }
-    }
-}
-
-impl VisibilityParams {
-    pub fn layout_kinds(&self) -> Result<Vec<LayoutKind>> {
-        self.layouts.iter().map(|l| l.parse().map_err(|e: String| Error::bad_arg("--layouts", e))).collect()
-    }
-
-    pub fn codec(&self) -> Result<DovCodec> {
-        self.dov_codec.parse().map_err(|e: String| Error::bad_arg("--dov-codec", e))
-    }
-
-    pub fn floor_tests(&self) -> Result<Vec<FloorTest>> {
-        self.zero_dov_floor
-            .iter()
-            .map(|t| match t.as_str() {
-                "box" => Ok(FloorTest::BoxWithin(0.0)),
-                "neighbours" => Ok(FloorTest::NeighbourCorners),
-                _ => Err(Error::bad_arg("--zero-dov-floor", format!("unknown test '{t}' (box, neighbours)"))),
-            })
-            .collect()
-    }
-
-    pub fn shard(&self) -> Shard {
-        self.shard.map_or(Shard::ALL, |[index, count]| Shard { index, count })
-    }
-}
-
-/// What the visibility stage measured and wrote.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct VisibilityInfo {
-    /// The backend that measured, with its adapter.
-    pub backend: String,
-    /// Cells of the grid this database holds visibility for.
-    pub cells_computed: u64,
-    pub sample_points: u64,
-    /// Objects given the one-texel floor (visible from the cell, seen from no sample point).
-    pub floored_objects: u64,
-    /// Sample points left out because they lie inside geometry.
-    pub skipped_points: u64,
-    pub seconds: f64,
-    pub layouts: Vec<LayoutInfo>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LayoutInfo {
-    pub name: String,
-    pub vpage_bytes: u64,
-    pub index_bytes: u64,
-    pub files: Vec<FileEntry>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Counts {
-    pub objects: u64,
-    pub base_meshes: u64,
-    /// Full-detail faces of every instance.
-    pub triangles: u64,
-    /// Full-detail faces of the base meshes (instances stored once).
-    pub stored_triangles: u64,
-    pub nodes: u64,
-    pub cells: u64,
-    /// Faces over all stored LOD levels (leaf and internal).
-    pub lod_triangles: u64,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct FileEntry {
-    pub name: String,
-    pub bytes: u64,
-}
-
-/// `manifest.json`. Its first key, `"hdov": "database"`, is the file's magic.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Manifest {
-    pub hdov: String,
-    pub format_version: u32,
-    pub created_by: String,
-    pub build: BuildParams,
-    pub counts: Counts,
-    pub tree: TreeStats,
-    pub grid: Option<ViewGrid>,
-    pub files: Vec<FileEntry>,
-    pub visibility: Option<VisibilityInfo>,
-}
-
-impl Manifest {
-    pub const MAGIC: &'static str = "database";
-
-    fn read(dir: &Path) -> Result<Manifest> {
-        let path = dir.join(MANIFEST_FILE);
-        let bytes = std::fs::read(&path).map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => Error::bad_file(dir, "not an hdov database (no manifest.json)"),
-            _ => Error::io(&path, e),
-        })?;
-        #[derive(Deserialize)]
-        struct Head {
-            hdov: String,
-            format_version: u32,
-        }
-        let head: Head =
-            serde_json::from_slice(&bytes).map_err(|e| Error::bad_file(&path, format!("not an hdov manifest: {e}")))?;
-        if head.hdov != Self::MAGIC {
-            return Err(Error::bad_file(&path, format!("an hdov '{}' file, not a database manifest", head.hdov)));
-        }
-        if head.format_version != FORMAT_VERSION {
-            return Err(Error::bad_file(
-                &path,
-                format!("database format version {}, this hdov reads version {FORMAT_VERSION}", head.format_version),
-            ));
-        }
-        serde_json::from_slice(&bytes).map_err(|e| Error::bad_file(&path, format!("malformed manifest: {e}")))
-    }
-}
-
 /// An open, read-only database. Tree pages are read through memory maps and counted.
+///
+/// Opening validates every file (the manifest's fields and recorded sizes, the page and blob
+/// headers, the catalog's references into the tree and the geometry); pages and records are
+/// checked against their checksums when read. A damaged database gives a one-line error that
+/// names the file, never a panic.
 pub struct Database {
     dir: PathBuf,
-    pub manifest: Manifest,
-    pub catalog: Catalog,
+    manifest: Manifest,
+    catalog: Catalog,
     tree: PageFile,
     geometry: BlobFile,
 }
@@ -248,15 +74,38 @@ impl Database {
                 format!("{} node pages, the manifest says {nodes}", tree.page_count()),
             ));
         }
-        if catalog.objects.len() as u64 != manifest.counts.objects {
-            return Err(Error::bad_file(&catalog_path, "object count differs from the manifest"));
+        if tree.page_size() != manifest.build.page_size {
+            return Err(Error::bad_file(
+                dir.join(TREE_FILE),
+                format!("pages of {} bytes, the manifest says {}", tree.page_size(), manifest.build.page_size),
+            ));
         }
-        catalog.check(nodes as usize).map_err(|r| Error::bad_file(&catalog_path, r))?;
+        let counts = &manifest.counts;
+        if catalog.objects.len() as u64 != counts.objects || catalog.mesh_lods.len() as u64 != counts.base_meshes {
+            return Err(Error::bad_file(&catalog_path, "object or base mesh count differs from the manifest"));
+        }
+        catalog.check(nodes as usize, geometry.file_len()).map_err(|r| Error::bad_file(&catalog_path, r))?;
         Ok(Database { dir: dir.to_path_buf(), manifest, catalog, tree, geometry })
     }
 
+    /// The database directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// What the database holds and how it was built (`manifest.json`).
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// Objects, base meshes and where every LOD level lives.
+    pub fn catalog(&self) -> &Catalog {
+        &self.catalog
+    }
+
+    /// The viewing-cell grid, if the database holds visibility.
+    pub fn grid(&self) -> Option<&ViewGrid> {
+        self.manifest.grid.as_ref()
     }
 
     pub fn node_count(&self) -> u32 {
@@ -281,14 +130,14 @@ impl Database {
 
     /// The layouts this database holds, in the order they were written.
     pub fn layouts(&self) -> Vec<LayoutKind> {
-        let names = self.manifest.visibility.iter().flat_map(|v| &v.layouts);
-        names.filter_map(|l| l.name.parse().ok()).collect()
+        // Checked on open to be the parsed names of the layouts written.
+        self.manifest.build.visibility.iter().flat_map(|v| v.layouts.iter().copied()).collect()
     }
 
     /// Opens the V-page reader of one layout.
     pub fn layout(&self, kind: LayoutKind, mode: ReadMode) -> Result<LayoutReader> {
         if !self.layouts().contains(&kind) {
-            return Err(Error::bad_arg("--layout", format!("{} holds no {kind} layout", self.dir.display())));
+            return Err(Error::bad_param("layout", format!("{} holds no {kind} layout", self.dir.display())));
         }
         let reader = LayoutReader::open(&self.dir, kind, mode)?;
         if reader.node_count() != self.node_count() {

@@ -315,7 +315,7 @@ fn padded(b: crate::geom::Aabb) -> BvhAabb {
 
 fn check_object_count(scene: &Scene) -> Result<()> {
     if scene.objects.len() > MAX_OBJECT_ID as usize {
-        return Err(Error::bad_arg(
+        return Err(Error::bad_param(
             "scene",
             format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
         ));
@@ -341,23 +341,24 @@ pub fn world_triangles(scene: &Scene) -> Result<(Vec<[Vec3; 3]>, Vec<u32>)> {
 }
 
 pub(crate) fn check_resolution_and_near(resolution: u32, near: f32) -> Result<()> {
-    if resolution == 0 || resolution > 16384 {
-        return Err(Error::bad_arg("resolution", format!("{resolution} is not in 1..=16384")));
+    let max = super::cubemap::MAX_RESOLUTION;
+    if resolution == 0 || resolution > max {
+        return Err(Error::bad_param("resolution", format!("{resolution} is not in 1..={max}")));
     }
     if !(near.is_finite() && near > 0.0) {
-        return Err(Error::bad_arg("near", format!("{near} must be finite and > 0")));
+        return Err(Error::bad_param("near", format!("{near} must be finite and > 0")));
     }
     Ok(())
 }
 
 pub(crate) fn check_point(p: Vec3) -> Result<()> {
-    if p.is_finite() { Ok(()) } else { Err(Error::bad_arg("point", format!("{p} is not finite"))) }
+    if p.is_finite() { Ok(()) } else { Err(Error::bad_param("point", format!("{p} is not finite"))) }
 }
 
 pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
     let r = resolution as usize;
     if out.resolution != resolution || out.ids.len() != cubemap::FACE_COUNT * r * r {
-        return Err(Error::bad_arg(
+        return Err(Error::bad_param(
             "id cube",
             format!("resolution {} does not match the backend's {resolution}", out.resolution),
         ));

@@ -17,6 +17,10 @@
 
 use glam::Vec3;
 
+/// Largest R: 8192 is the 2D texture size every wgpu adapter must offer, and a cube map of it
+/// already holds 6 · 8192² = 403 M texels.
+pub const MAX_RESOLUTION: u32 = 8192;
+
 /// The six cube faces, in the order used for texel indices: +X, −X, +Y, −Y, +Z, −Z.
 pub const FACE_COUNT: usize = 6;
 

@@ -183,19 +183,19 @@ impl GpuBackend {
     /// `options.lods`, every coarser level of every object is uploaded as well (world space, so
     /// GPU memory grows by the coarser levels' triangles: at most about as much again as the
     /// scene for ratio ½, +29 % on the small generated city).
-    /// Fails with [`Error::BadArgument`] when `lods` has not one chain per base mesh
+    /// Fails with [`Error::BadParam`] when `lods` has not one chain per base mesh
     /// or the tolerance is negative or not finite.
     pub fn with_options(scene: &Scene, resolution: u32, options: &GpuOptions) -> Result<Self> {
         let near = options.near.unwrap_or_else(|| super::default_near(&scene.bounds()));
         check_resolution_and_near(resolution, near)?;
         let tolerance = options.lod_tolerance_texels;
         if !(tolerance.is_finite() && tolerance >= 0.0) {
-            return Err(Error::bad_arg("LOD tolerance", format!("{tolerance} must be finite and >= 0")));
+            return Err(Error::bad_param("LOD tolerance", format!("{tolerance} must be finite and >= 0")));
         }
         if let Some(lods) = options.lods
             && lods.len() != scene.meshes.len()
         {
-            return Err(Error::bad_arg(
+            return Err(Error::bad_param(
                 "LODs",
                 format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
             ));

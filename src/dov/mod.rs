@@ -249,7 +249,7 @@ impl std::str::FromStr for BackendKind {
             "auto" => Ok(BackendKind::Auto),
             "gpu" => Ok(BackendKind::Gpu),
             "cpu" => Ok(BackendKind::Cpu),
-            _ => Err(crate::Error::bad_arg("--backend", format!("'{s}': expected auto, gpu or cpu"))),
+            _ => Err(crate::Error::bad_param("backend", format!("'{s}': expected auto, gpu or cpu"))),
         }
     }
 }
@@ -266,7 +266,7 @@ pub fn open_backend(
     gpu: &gpu::GpuOptions,
 ) -> Result<Box<dyn DovBackend>> {
     if !(1..=4096).contains(&resolution) {
-        return Err(crate::Error::bad_arg(
+        return Err(crate::Error::bad_param(
             "--resolution",
             format!("{resolution} is outside 1..=4096 texels per face edge"),
         ));

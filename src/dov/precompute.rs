@@ -37,13 +37,13 @@ impl TreeShape {
     pub fn check(&self, objects: usize) -> Result<()> {
         let nodes = self.node_parent.len();
         if self.object_leaf.len() != objects {
-            return Err(Error::bad_arg(
+            return Err(Error::bad_param(
                 "tree shape",
                 format!("{} object leaves for {objects} objects", self.object_leaf.len()),
             ));
         }
         if let Some(&bad) = self.object_leaf.iter().find(|&&l| l as usize >= nodes) {
-            return Err(Error::bad_arg("tree shape", format!("leaf {bad} out of range ({nodes} nodes)")));
+            return Err(Error::bad_param("tree shape", format!("leaf {bad} out of range ({nodes} nodes)")));
         }
         for start in 0..nodes {
             let mut node = start;
@@ -52,7 +52,7 @@ impl TreeShape {
                     None => break,
                     Some(p) if (p as usize) < nodes && step < nodes => node = p as usize,
                     Some(p) => {
-                        return Err(Error::bad_arg(
+                        return Err(Error::bad_param(
                             "tree shape",
                             format!("node {start}: parent {p} out of range or a cycle"),
                         ));
@@ -97,7 +97,8 @@ impl CellDov {
 
 /// Part `index` of `count` of a grid's cells: the contiguous cell-id range
 /// `[index·C/count, (index+1)·C/count)`. Contiguous ranges keep most corners inside one shard.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "[u32; 2]", try_from = "[u32; 2]")]
 pub struct Shard {
     pub index: u32,
     pub count: u32,
@@ -107,14 +108,10 @@ impl Shard {
     /// The whole grid.
     pub const ALL: Shard = Shard { index: 0, count: 1 };
 
-    /// Parses `I/N` (0 ≤ I < N), the CLI's `--shard` value.
-    pub fn parse(s: &str) -> Result<Shard> {
-        let bad = |why: &str| Error::bad_arg("--shard", format!("'{s}': {why}"));
-        let (i, n) = s.split_once('/').ok_or_else(|| bad("expected I/N"))?;
-        let index: u32 = i.trim().parse().map_err(|_| bad("I is not a number"))?;
-        let count: u32 = n.trim().parse().map_err(|_| bad("N is not a number"))?;
+    /// Part `index` of `count`; refused unless 0 ≤ index < count.
+    pub fn new(index: u32, count: u32) -> std::result::Result<Shard, String> {
         if count == 0 || index >= count {
-            return Err(bad("need 0 ≤ I < N"));
+            return Err(format!("{index}/{count}: need 0 ≤ I < N"));
         }
         Ok(Shard { index, count })
     }
@@ -125,6 +122,36 @@ impl Shard {
         let lo = c * self.index as u64 / self.count as u64;
         let hi = c * (self.index as u64 + 1) / self.count as u64;
         lo as usize..hi as usize
+    }
+}
+
+impl From<Shard> for [u32; 2] {
+    fn from(s: Shard) -> [u32; 2] {
+        [s.index, s.count]
+    }
+}
+
+impl TryFrom<[u32; 2]> for Shard {
+    type Error = String;
+    fn try_from([index, count]: [u32; 2]) -> std::result::Result<Shard, String> {
+        Shard::new(index, count)
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    /// `I/N` (0 ≤ I < N), as `--shard` takes it.
+    fn from_str(s: &str) -> std::result::Result<Shard, String> {
+        let (i, n) = s.split_once('/').ok_or_else(|| format!("'{s}': expected I/N"))?;
+        let index: u32 = i.trim().parse().map_err(|_| format!("'{s}': I is not a number"))?;
+        let count: u32 = n.trim().parse().map_err(|_| format!("'{s}': N is not a number"))?;
+        Shard::new(index, count)
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
     }
 }
 
@@ -144,6 +171,8 @@ pub enum FloorTest {
 }
 
 impl FloorTest {
+    /// The names a build takes: `box` (the object's box meets the cell's) and `neighbours`.
+    pub const NAMES: &'static str = "box, box:MARGIN, neighbours";
     /// Whether this test finds `object` (with world box `bounds`) possibly visible from the cell
     /// `cell_box`; `seen_nearby` holds the objects that the neighbouring cells' corners see.
     pub fn finds(&self, object: u32, bounds: &Aabb, cell_box: &Aabb, seen_nearby: &HashSet<u32>) -> bool {
@@ -153,6 +182,31 @@ impl FloorTest {
                 !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
             }
             FloorTest::NeighbourCorners => seen_nearby.contains(&object),
+        }
+    }
+}
+
+impl std::fmt::Display for FloorTest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            FloorTest::BoxWithin(m) if m == 0.0 => f.write_str("box"),
+            FloorTest::BoxWithin(m) => write!(f, "box:{m}"),
+            FloorTest::NeighbourCorners => f.write_str("neighbours"),
+        }
+    }
+}
+
+impl std::str::FromStr for FloorTest {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<FloorTest, String> {
+        let margin = |m: &str| m.parse::<f32>().ok().filter(|m| m.is_finite() && *m >= 0.0);
+        match s.split_once(':') {
+            None if s == "box" => Ok(FloorTest::BoxWithin(0.0)),
+            None if s == "neighbours" => Ok(FloorTest::NeighbourCorners),
+            Some(("box", m)) => margin(m)
+                .map(FloorTest::BoxWithin)
+                .ok_or_else(|| format!("'{s}': the margin must be a finite length >= 0")),
+            _ => Err(format!("unknown test '{s}' (expected {})", FloorTest::NAMES)),
         }
     }
 }
@@ -255,10 +309,10 @@ pub fn precompute_shard(
     shard: Shard,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ShardDov> {
-    grid.check().map_err(|r| Error::bad_arg("grid", r))?;
+    grid.check().map_err(|r| Error::bad_param("grid", r))?;
     shape.check(object_bounds.len())?;
     if shard.count == 0 || shard.index >= shard.count {
-        return Err(Error::bad_arg("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
+        return Err(Error::bad_param("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
     let cells = shard.cells(grid);
     let neighbours = options.uses_neighbours();

@@ -47,8 +47,44 @@ struct ObjectEntry {
     transform: [f32; 16],
 }
 
-/// Writes `path` (the JSON manifest) and its geometry sidecar (same stem, `.meshes`).
-pub fn write(scene: &Scene, path: &Path) -> Result<()> {
+/// Whether `path` is a scene manifest written by hdov (its `"format"` says so).
+fn is_scene_manifest(path: &Path) -> bool {
+    #[derive(Deserialize)]
+    struct Head {
+        format: String,
+    }
+    std::fs::read(path).is_ok_and(|b| serde_json::from_slice::<Head>(&b).is_ok_and(|h| h.format == FORMAT))
+}
+
+/// Refuses to overwrite `path` unless `replace` and `ours` says hdov wrote it.
+fn claim(path: &Path, replace: bool, ours: bool) -> Result<()> {
+    if std::fs::symlink_metadata(path).is_err() {
+        return Ok(());
+    }
+    let path_s = path.display().to_string();
+    match (replace, ours) {
+        (false, _) => Err(hdov_storage::Error::Exists { path: path_s }.into()),
+        (true, false) => Err(hdov_storage::Error::NotOurs { path: path_s }.into()),
+        (true, true) => Ok(()),
+    }
+}
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it and renames it into place, so
+/// `path` is always either the old file or the new one.
+fn replace_file(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let temp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+    let result = write(&temp).and_then(|()| std::fs::rename(&temp, path).map_err(|e| Error::io(path, e)));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&temp);
+    }
+    result
+}
+
+/// Writes `path` (the JSON manifest) and its geometry sidecar (same stem, `.meshes`). Existing
+/// files are refused unless `replace` and they are a scene manifest and mesh file of hdov's;
+/// each is replaced whole (written beside it, synced, renamed).
+pub fn write(scene: &Scene, path: &Path, replace: bool) -> Result<()> {
     let meshes_path = path.with_extension("meshes");
     let meshes_file = meshes_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let manifest = ManifestFile {
@@ -71,15 +107,20 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
             .collect(),
         grid: scene.grid,
     };
-    let mut blobs = BlobWriter::create(&meshes_path, MESHES_KIND)?;
-    for m in &scene.meshes {
-        let bytes = bincode::serde::encode_to_vec(&m.mesh, bincode::config::standard())
-            .map_err(|e| Error::bad_file(&meshes_path, format!("encoding mesh '{}': {e}", m.name)))?;
-        blobs.append(&bytes)?;
-    }
-    blobs.finish()?;
+    claim(path, replace, is_scene_manifest(path))?;
+    claim(&meshes_path, replace, BlobFile::open(&meshes_path, MESHES_KIND).is_ok())?;
+    replace_file(&meshes_path, |temp| {
+        let mut blobs = BlobWriter::create(temp, MESHES_KIND)?;
+        for m in &scene.meshes {
+            let bytes = bincode::serde::encode_to_vec(&m.mesh, bincode::config::standard())
+                .map_err(|e| Error::bad_file(&meshes_path, format!("encoding mesh '{}': {e}", m.name)))?;
+            blobs.append(&bytes)?;
+        }
+        blobs.finish()?;
+        Ok(())
+    })?;
     let json = serde_json::to_vec_pretty(&manifest).map_err(|e| Error::bad_file(path, e.to_string()))?;
-    std::fs::write(path, json).map_err(|e| Error::io(path, e))
+    replace_file(path, |temp| Ok(hdov_storage::write_file_synced(temp, &json)?))
 }
 
 /// Reads a manifest and its geometry. Every inconsistency is an error naming the file.
@@ -151,15 +192,36 @@ mod tests {
     fn round_trip() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        write(&scene(), &p).unwrap();
+        write(&scene(), &p, false).unwrap();
         assert_eq!(read(&p).unwrap(), scene());
+    }
+
+    #[test]
+    fn existing_files_are_replaced_only_if_ours() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.json");
+        write(&scene(), &p, false).unwrap();
+        let err = write(&scene(), &p, false).unwrap_err().to_string();
+        assert!(err.ends_with("s.json: exists"), "{err}");
+        write(&scene(), &p, true).unwrap();
+        // A user's file with the sidecar's name survives, as does one with the manifest's.
+        std::fs::write(p.with_extension("meshes"), b"my notes").unwrap();
+        let err = write(&scene(), &p, true).unwrap_err().to_string();
+        assert!(err.contains("s.meshes") && err.contains("refusing"), "{err}");
+        assert_eq!(std::fs::read(p.with_extension("meshes")).unwrap(), b"my notes");
+        let q = dir.path().join("mine.json");
+        std::fs::write(&q, b"{\"format\": \"not hdov\"}").unwrap();
+        assert!(write(&scene(), &q, true).unwrap_err().to_string().contains("refusing"));
+        assert_eq!(std::fs::read(&q).unwrap(), b"{\"format\": \"not hdov\"}");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 3, "no temporary files left: {names:?}");
     }
 
     #[test]
     fn corrupted_or_truncated_geometry_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        write(&scene(), &p).unwrap();
+        write(&scene(), &p, false).unwrap();
         let mp = p.with_extension("meshes");
         let good = std::fs::read(&mp).unwrap();
         let mut flipped = good.clone();

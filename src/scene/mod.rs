@@ -54,7 +54,29 @@ impl Mesh {
 
     /// Checks what every consumer relies on: finite coordinates, whole triangles, indices in range.
     /// Returns the reason of the first violation.
+    /// The cube [-0.5, 0.5]³: 8 vertices, 12 triangles, counter-clockwise seen from outside.
+    pub fn unit_cube() -> Mesh {
+        let positions: Vec<[f32; 3]> = (0..8)
+            .map(|i: u32| [i & 1, i & 2, i & 4].map(|bit| if bit == 0 { -0.5 } else { 0.5 }))
+            .collect();
+        let quads: [[u32; 4]; 6] = [
+            [0, 4, 6, 2], // -x
+            [1, 3, 7, 5], // +x
+            [0, 1, 5, 4], // -y
+            [2, 6, 7, 3], // +y
+            [0, 2, 3, 1], // -z
+            [4, 5, 7, 6], // +z
+        ];
+        let indices = quads.iter().flat_map(|&[a, b, c, d]| [a, b, c, a, c, d]).collect();
+        Mesh { positions, indices }
+    }
+
+    /// Checks that the mesh has triangles, finite vertices and indices in range.
     pub fn check(&self) -> std::result::Result<(), String> {
+        if self.indices.is_empty() {
+            // An empty mesh has no box: it would poison the tree above it.
+            return Err(format!("no triangles ({} vertices)", self.positions.len()));
+        }
         if let Some(i) = self.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
             return Err(format!("vertex {i} has a non-finite coordinate {:?}", self.positions[i]));
         }
@@ -144,6 +166,31 @@ impl Scene {
     }
 
     /// Checks the invariants every stage relies on; returns the first violation as one line.
+    /// Adds a base mesh; returns its index.
+    pub fn add_mesh(&mut self, name: &str, mesh: Mesh) -> u32 {
+        self.meshes.push(BaseMesh { name: name.into(), mesh });
+        self.meshes.len() as u32 - 1
+    }
+
+    /// Adds an object instancing base mesh `mesh` under `transform`; returns its index.
+    pub fn add_object(&mut self, name: &str, mesh: u32, transform: Mat4) -> u32 {
+        self.objects.push(Object { name: name.into(), mesh, transform });
+        self.objects.len() as u32 - 1
+    }
+
+    /// Adds an axis-aligned box object with corners `min` and `max`, an instance of one shared
+    /// unit cube (base mesh `"cube"`, added on first use); returns the object's index.
+    pub fn add_box(&mut self, name: &str, min: Vec3, max: Vec3) -> u32 {
+        let cube = match self.meshes.iter().position(|m| m.name == "cube") {
+            Some(i) => i as u32,
+            None => self.add_mesh("cube", Mesh::unit_cube()),
+        };
+        let transform = Mat4::from_scale_rotation_translation(max - min, glam::Quat::IDENTITY, (min + max) * 0.5);
+        self.add_object(name, cube, transform)
+    }
+
+    /// Checks that the scene can be built: objects exist, meshes are valid and non-empty,
+    /// references are in range, transforms finite, names unique, the grid (if any) valid.
     pub fn check(&self) -> std::result::Result<(), String> {
         if self.objects.is_empty() {
             return Err("scene has no objects".into());

@@ -15,6 +15,14 @@ pub fn write_file_synced(path: &Path, bytes: &[u8]) -> Result<()> {
     f.sync_all().map_err(|e| Error::io(path, e))
 }
 
+/// What [`DirTxn::begin`] may do with an existing target.
+#[derive(Clone, Copy, Debug)]
+pub enum Overwrite {
+    Never,
+    /// Replace an existing target only if it is an empty directory or the predicate says it is ours.
+    IfOurs(fn(&Path) -> bool),
+}
+
 /// A directory being written; becomes `target` on [`commit`](Self::commit), vanishes on drop.
 #[derive(Debug)]
 pub struct DirTxn {
@@ -22,6 +30,21 @@ pub struct DirTxn {
     temp: PathBuf,
     force: bool,
     committed: bool,
+    cleaned: Vec<PathBuf>,
+}
+
+fn check_target(target: &Path, overwrite: Overwrite) -> Result<()> {
+    if !exists(target) {
+        return Ok(());
+    }
+    match overwrite {
+        Overwrite::Never => Err(Error::Exists { path: path_str(target) }),
+        Overwrite::IfOurs(ours) => {
+            let meta = fs::symlink_metadata(target).map_err(|e| Error::io(target, e))?;
+            let empty = meta.is_dir() && fs::read_dir(target).map_err(|e| Error::io(target, e))?.next().is_none();
+            if meta.is_dir() && (empty || ours(target)) { Ok(()) } else { Err(Error::NotOurs { path: path_str(target) }) }
+        }
+    }
 }
 
 fn split_target(target: &Path) -> Result<(PathBuf, String)> {
@@ -44,10 +67,9 @@ fn exists(path: &Path) -> bool {
 impl DirTxn {
     /// Starts writing `target`: creates `.<name>.tmp-<pid>` beside it (and the parent, if
     /// missing). Refuses when `target` exists and `force` is false.
-    pub fn begin(target: &Path, force: bool) -> Result<Self> {
-        if exists(target) && !force {
-            return Err(Error::Exists { path: path_str(target) });
-        }
+    pub fn begin(target: &Path, overwrite: Overwrite) -> Result<Self> {
+        check_target(target, overwrite)?;
+        let force = matches!(overwrite, Overwrite::IfOurs(_));
         let (parent, name) = split_target(target)?;
         fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
         let temp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
@@ -56,12 +78,17 @@ impl DirTxn {
             fs::remove_dir_all(&temp).map_err(|e| Error::io(&temp, e))?;
         }
         fs::create_dir(&temp).map_err(|e| Error::io(&temp, e))?;
-        Ok(Self { target: target.to_path_buf(), temp, force, committed: false })
+        Ok(Self { target: target.to_path_buf(), temp, force, committed: false, cleaned: Vec::new() })
     }
 
     /// The temporary directory to write into.
     pub fn path(&self) -> &Path {
         &self.temp
+    }
+
+    /// Leftovers of dead processes removed by `begin`.
+    pub fn cleaned(&self) -> &[PathBuf] {
+        &self.cleaned
     }
 
     /// The directory this transaction will become.

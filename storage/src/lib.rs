@@ -21,7 +21,7 @@ pub mod pagefile;
 pub mod synthetic;
 pub mod vpage;
 
-pub use atomic::{DirTxn, write_file_synced};
+pub use atomic::{DirTxn, Overwrite, write_file_synced};
 pub use blob::{BlobFile, BlobRef, BlobWriter};
 pub use error::{Error, Result};
 pub use io_stats::{FileIo, IoStats, PageCounter};

@@ -2,7 +2,7 @@
 
 use std::fs;
 
-use hdov_storage::{DirTxn, Error, write_file_synced};
+use hdov_storage::{DirTxn, Error, Overwrite, write_file_synced};
 
 fn entries(dir: &std::path::Path) -> Vec<String> {
     let mut v: Vec<_> =
@@ -15,7 +15,7 @@ fn entries(dir: &std::path::Path) -> Vec<String> {
 fn commit_creates_target() {
     let root = tempfile::tempdir().unwrap();
     let target = root.path().join("sub/db");
-    let txn = DirTxn::begin(&target, false).unwrap();
+    let txn = DirTxn::begin(&target, Overwrite::Never).unwrap();
     assert!(!target.exists());
     write_file_synced(&txn.path().join("a"), b"one").unwrap();
     fs::create_dir(txn.path().join("nested")).unwrap();
@@ -32,11 +32,11 @@ fn existing_target_needs_force() {
     let target = root.path().join("db");
     fs::create_dir(&target).unwrap();
     write_file_synced(&target.join("old"), b"old").unwrap();
-    let e = DirTxn::begin(&target, false).unwrap_err();
+    let e = DirTxn::begin(&target, Overwrite::Never).unwrap_err();
     assert!(matches!(e, Error::Exists { .. }));
     assert!(e.to_string().ends_with("exists; pass --force to overwrite"), "{e}");
 
-    let txn = DirTxn::begin(&target, true).unwrap();
+    let txn = DirTxn::begin(&target, Overwrite::IfOurs(|_| true)).unwrap();
     write_file_synced(&txn.path().join("new"), b"new").unwrap();
     // The old database stays whole until commit.
     assert_eq!(fs::read(target.join("old")).unwrap(), b"old");
@@ -49,7 +49,7 @@ fn existing_target_needs_force() {
 fn target_created_meanwhile_is_not_clobbered() {
     let root = tempfile::tempdir().unwrap();
     let target = root.path().join("db");
-    let txn = DirTxn::begin(&target, false).unwrap();
+    let txn = DirTxn::begin(&target, Overwrite::Never).unwrap();
     fs::create_dir(&target).unwrap();
     assert!(matches!(txn.commit(), Err(Error::Exists { .. })));
     assert_eq!(entries(root.path()), vec!["db"]);
@@ -60,7 +60,7 @@ fn drop_without_commit_removes_temp() {
     let root = tempfile::tempdir().unwrap();
     let target = root.path().join("db");
     {
-        let txn = DirTxn::begin(&target, false).unwrap();
+        let txn = DirTxn::begin(&target, Overwrite::Never).unwrap();
         write_file_synced(&txn.path().join("a"), b"x").unwrap();
         assert!(txn.path().exists());
         assert!(txn.path().file_name().unwrap().to_string_lossy().starts_with(".db.tmp-"));

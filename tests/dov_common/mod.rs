@@ -79,27 +79,9 @@ fn assert_outward(mesh: &Mesh) {
     }
 }
 
-/// The unit cube [-0.5, 0.5]³, 12 triangles, counter-clockwise seen from outside.
+/// The library's unit cube, checked to face outwards.
 pub fn unit_cube() -> Mesh {
-    let positions: Vec<[f32; 3]> = (0..8)
-        .map(|i| {
-            [
-                if i & 1 == 0 { -0.5 } else { 0.5 },
-                if i & 2 == 0 { -0.5 } else { 0.5 },
-                if i & 4 == 0 { -0.5 } else { 0.5 },
-            ]
-        })
-        .collect();
-    let quads = [
-        [0, 4, 6, 2], // -x
-        [1, 3, 7, 5], // +x
-        [0, 1, 5, 4], // -y
-        [2, 6, 7, 3], // +y
-        [0, 2, 3, 1], // -z
-        [4, 5, 7, 6], // +z
-    ];
-    let indices = quads.iter().flat_map(|&[a, b, c, d]| [a, b, c, a, c, d]).collect();
-    let mesh = Mesh { positions, indices };
+    let mesh = Mesh::unit_cube();
     assert_outward(&mesh);
     mesh
 }
@@ -124,11 +106,8 @@ impl SceneBuilder {
 
     /// An axis-aligned box object with the given corners.
     pub fn aabox(&mut self, min: Vec3, max: Vec3) -> u32 {
-        let cube = match self.scene.meshes.iter().position(|m| m.name == "cube") {
-            Some(i) => i as u32,
-            None => self.mesh("cube", unit_cube()),
-        };
-        self.object(cube, Mat4::from_scale_rotation_translation(max - min, glam::Quat::IDENTITY, (min + max) * 0.5))
+        let id = self.scene.objects.len();
+        self.scene.add_box(&format!("o{id}"), min, max)
     }
 
     pub fn build(self) -> Scene {

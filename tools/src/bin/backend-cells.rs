@@ -14,8 +14,8 @@ use hdov::rtree::{RTree, TreeAlgorithm};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let r: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(64);
-    let shard = Shard::parse(&args.next().unwrap_or_else(|| "0/8".into()))?;
-    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
+    let shard: Shard = args.next().unwrap_or_else(|| "0/8".into()).parse()?;
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
     let grid = scene.grid.expect("the city brings a grid");
     let tree = RTree::build(&scene.all_object_bounds(), fanout(4096), TreeAlgorithm::Str);
     let shape =

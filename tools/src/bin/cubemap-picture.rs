@@ -14,7 +14,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let out = args.next().unwrap_or_else(|| "docs/cubemap.png".into());
     let r: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(192);
-    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
     let grid = scene.grid.expect("the city brings a grid");
     // The grid corner near the city's middle that sees the most objects from the street (not from
     // inside a building), at eye height: found with a coarse cube map.

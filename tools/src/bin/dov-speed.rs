@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let points: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(24);
     let resolutions: Vec<u32> =
         args.next().unwrap_or_else(|| "128,256,512".into()).split(',').map(str::parse).collect::<Result<_, _>>()?;
-    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() });
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
     let grid = scene.grid.expect("the city brings a grid");
     let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();

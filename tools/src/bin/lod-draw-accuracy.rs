@@ -21,7 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .split(',')
         .map(str::parse)
         .collect::<Result<_, _>>()?;
-    let scene = generate(&CityParams { scale, ..Default::default() });
+    let scene = generate(&CityParams { scale, ..Default::default() })?;
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
     println!(
         "city {scale}: {} objects, {} triangles; LOD chains add {} stored triangles",

@@ -1,23 +1,37 @@
-//! Writing a database: tree, LODs and (in later stages) visibility, all into a temporary
-//! directory that becomes the database only when every file is complete and synced.
+//! The writer: a database from a scene in stages — R-tree (bulk load), leaf and internal LODs,
+//! DoV per cell, V-pages in every chosen layout — all into a temporary directory that becomes
+//! the database only when every file is complete and synced ([`hdov_storage::DirTxn`]).
+//!
+//! - [`params`]: what a build takes, with its bounds, checked before any work;
+//! - [`vpages`]: from per-cell DoV to V-pages and back;
+//! - [`merge`]: shard databases joined into one.
 
-use std::path::Path;
+pub mod merge;
+pub mod params;
+pub mod vpages;
+
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use hdov_storage::{BlobWriter, DirTxn, PageFileWriter};
+use serde::Serialize;
 
-use super::catalog::{Catalog, LodRef, ObjectRecord};
-use super::tree_page::{self, NodePage};
-use super::*;
+use crate::db::catalog::{Catalog, LodRef, ObjectRecord};
+use crate::db::tree_page::{self, NodePage};
+use crate::db::{
+    CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
+    MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
+};
 use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
 use crate::dov::{BackendKind, open_backend};
+use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
-use hdov_storage::{LayoutOptions, VData, write_layout};
+use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, Overwrite, PageFileWriter, VData, write_layout};
+pub use params::{BuildParams, VisibilityParams, limits};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]
@@ -26,21 +40,37 @@ pub struct BuildReport {
     pub tree_seconds: f64,
     pub lod_seconds: f64,
     pub write_seconds: f64,
+    /// Leftovers of builds that died (temporary folders beside the target), removed.
+    pub cleaned: Vec<PathBuf>,
 }
 
-/// Builds the database for `scene` at `out`. Refuses an existing `out` unless `force`; on any
-/// error the target is left as it was.
-pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progress: &Progress) -> Result<BuildReport> {
-    scene.check().map_err(|r| Error::bad_arg("scene", r))?;
+/// Claims `out` for writing: refuses an existing `out` unless `replace` and it is an hdov
+/// database or an empty directory; removes leftovers of dead builds beside it.
+pub(crate) fn begin_write(out: &Path, replace: bool) -> Result<DirTxn> {
+    let overwrite = if replace { Overwrite::IfOurs(is_database) } else { Overwrite::Never };
+    Ok(DirTxn::begin(out, overwrite)?)
+}
+
+/// Builds the database for `scene` at `out`.
+///
+/// Every parameter, the scene and the grid are checked first, then the target is claimed: an
+/// existing `out` is refused unless `replace` is set and `out` is an hdov database or an empty
+/// directory (a folder of anything else is never touched). On any error, and if the process
+/// dies, `out` is left as it was. Costs the tree (O(n log n)), the LODs (meshopt, linear in the
+/// faces) and, with visibility, one cube map per distinct sample point.
+pub fn build(
+    scene: &Scene,
+    out: &Path,
+    params: &BuildParams,
+    replace: bool,
+    progress: &Progress,
+) -> Result<BuildReport> {
+    scene.check().map_err(|r| Error::bad_param("scene", r))?;
+    params.check(scene.grid.as_ref())?;
     let fanout = tree_page::fanout(params.page_size);
-    if fanout < 2 || params.page_size > hdov_storage::pagefile::MAX_PAGE_SIZE {
-        return Err(Error::bad_arg(
-            "--page-size",
-            format!("{} bytes holds {fanout} entries; a node needs at least 2", params.page_size),
-        ));
-    }
     // Claim the target first: a refusal must come before minutes of work, not after.
-    let txn = DirTxn::begin(out, force)?;
+    let txn = begin_write(out, replace)?;
+    let cleaned = txn.cleaned().to_vec();
 
     let t = Instant::now();
     let boxes = scene.all_object_bounds();
@@ -61,7 +91,7 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
             .iter()
             .map(|level| {
                 let bytes = bincode::serde::encode_to_vec(&level.mesh, bincode::config::standard())
-                    .map_err(|e| Error::bad_arg("geometry", e.to_string()))?;
+                    .map_err(|e| Error::bad_file(dir.join(GEOMETRY_FILE), e.to_string()))?;
                 let r = geometry.append(&bytes)?;
                 Ok(LodRef { faces: level.faces() as u32, error: level.error, offset: r.offset, len: r.len })
             })
@@ -99,7 +129,7 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
     };
     let mut cat = BlobWriter::create(&dir.join(CATALOG_FILE), CATALOG_KIND)?;
     let bytes = bincode::serde::encode_to_vec(&catalog, bincode::config::standard())
-        .map_err(|e| Error::bad_arg("catalog", e.to_string()))?;
+        .map_err(|e| Error::bad_file(dir.join(CATALOG_FILE), e.to_string()))?;
     cat.append(&bytes)?;
     cat.finish()?;
 
@@ -134,10 +164,9 @@ pub fn build(scene: &Scene, out: &Path, params: &BuildParams, force: bool, progr
         let bytes = std::fs::metadata(dir.join(name)).map_err(|e| Error::io(dir.join(name), e))?.len();
         manifest.files.push(FileEntry { name: name.into(), bytes });
     }
-    let json = serde_json::to_vec_pretty(&manifest).map_err(|e| Error::bad_arg("manifest", e.to_string()))?;
-    hdov_storage::write_file_synced(&dir.join(MANIFEST_FILE), &json)?;
+    write_manifest(&dir, &manifest)?;
     txn.commit()?;
-    Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64() })
+    Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned })
 }
 
 /// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.
@@ -152,8 +181,6 @@ fn build_visibility(
     dir: &Path,
     progress: &Progress,
 ) -> Result<VisibilityInfo> {
-    let kinds = v.layout_kinds()?;
-    let codec = v.codec()?;
     let t = Instant::now();
     let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, near: None };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
@@ -161,7 +188,7 @@ fn build_visibility(
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions {
         interior_samples: v.interior_samples,
-        zero_dov_tests: v.floor_tests()?,
+        zero_dov_tests: v.zero_dov_floor.clone(),
         ..Default::default()
     };
     let bar = progress.bar("sample points", 0);
@@ -178,8 +205,8 @@ fn build_visibility(
         },
     )?;
     bar.finish_and_clear();
-    let data = visibility::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);
-    let layouts = write_layouts(dir, &kinds, &data, page_size, codec)?;
+    let data = vpages::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);
+    let layouts = write_layouts(dir, &v.layouts, &data, page_size, v.dov_codec)?;
     Ok(VisibilityInfo {
         backend: backend.name(),
         cells_computed: dov.cells.len() as u64,
@@ -189,6 +216,14 @@ fn build_visibility(
         seconds: t.elapsed().as_secs_f64(),
         layouts,
     })
+}
+
+/// Writes `manifest.json` into the directory being built (synced): the last file, whose
+/// presence makes the directory a database.
+pub(crate) fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
+    let path = dir.join(MANIFEST_FILE);
+    let json = serde_json::to_vec_pretty(manifest).map_err(|e| Error::bad_file(&path, e.to_string()))?;
+    Ok(hdov_storage::write_file_synced(&path, &json)?)
 }
 
 /// Writes every chosen layout of `data` into `dir`.

@@ -1,0 +1,111 @@
+//! [`Info`]: what `hdov info --json` prints, as a library type that the command and the
+//! experiment tools share.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::{Database, FileEntry, VisibilityInfo};
+use crate::build::BuildParams;
+use crate::error::Result;
+use crate::rtree::TreeStats;
+use hdov_storage::ReadMode;
+
+/// A database described: counts, grid, build parameters, files and every layout's costs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Info {
+    pub format_version: u32,
+    pub created_by: String,
+    pub objects: u64,
+    /// Full-detail faces of every instance.
+    pub triangles: u64,
+    /// Full-detail faces of the base meshes (instances stored once).
+    pub stored_triangles: u64,
+    pub base_meshes: u64,
+    pub nodes: u64,
+    pub cells: u64,
+    /// Faces over all stored LOD levels (leaf and internal).
+    pub lod_triangles: u64,
+    pub grid: Option<GridInfo>,
+    /// Cube-face resolution R of the DoV measurement.
+    pub resolution: Option<u32>,
+    pub tree: TreeStats,
+    pub build: BuildParams,
+    pub files: Vec<FileEntry>,
+    pub visibility: Option<VisibilityInfo>,
+    /// Per layout name.
+    pub layouts: BTreeMap<String, LayoutCosts>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridInfo {
+    /// `[x0, y0, z0, x1, y1, z1]`.
+    pub region: [f32; 6],
+    /// Cells along x, y (height layers) and z.
+    pub dims: [u32; 3],
+}
+
+/// What one layout costs on disk and per cell flip.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayoutCosts {
+    /// Bytes of all the layout's files.
+    pub bytes: u64,
+    pub vpage_bytes: u64,
+    pub index_bytes: u64,
+    pub dov_codec: String,
+    pub visible_nodes_per_cell: MeanMax,
+    /// Storage per visible (node, cell) pair: what the layout pays for visibility.
+    pub bytes_per_visible_vpage: f64,
+    /// Pages a cell flip reads.
+    pub flip_pages: MeanMax,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MeanMax {
+    pub mean: f64,
+    pub max: u32,
+}
+
+impl Database {
+    /// Describes the database. Opens each layout's reader (headers and metadata only).
+    pub fn info(&self) -> Result<Info> {
+        let m = self.manifest();
+        let c = &m.counts;
+        let mut layouts = BTreeMap::new();
+        for kind in self.layouts() {
+            let s = self.layout(kind, ReadMode::Mmap)?.summary();
+            let written = m.visibility.iter().flat_map(|v| &v.layouts).find(|l| l.name == kind.name());
+            let visible_pages = (s.visible_nodes_mean * f64::from(s.cell_count)).max(1.0);
+            layouts.insert(
+                kind.name().to_string(),
+                LayoutCosts {
+                    bytes: s.bytes,
+                    vpage_bytes: written.map_or(0, |l| l.vpage_bytes),
+                    index_bytes: written.map_or(0, |l| l.index_bytes),
+                    dov_codec: s.dov.to_string(),
+                    visible_nodes_per_cell: MeanMax { mean: s.visible_nodes_mean, max: s.visible_nodes_max },
+                    bytes_per_visible_vpage: s.bytes as f64 / visible_pages,
+                    flip_pages: MeanMax { mean: s.flip_pages_mean, max: s.flip_pages_max },
+                },
+            );
+        }
+        Ok(Info {
+            format_version: m.format_version,
+            created_by: m.created_by.clone(),
+            objects: c.objects,
+            triangles: c.triangles,
+            stored_triangles: c.stored_triangles,
+            base_meshes: c.base_meshes,
+            nodes: c.nodes,
+            cells: c.cells,
+            lod_triangles: c.lod_triangles,
+            grid: m.grid.map(|g| GridInfo { region: g.region.to_array(), dims: g.dims }),
+            resolution: m.build.visibility.as_ref().map(|v| v.resolution),
+            tree: m.tree.clone(),
+            build: m.build.clone(),
+            files: m.files.clone(),
+            visibility: m.visibility.clone(),
+            layouts,
+        })
+    }
+}

@@ -1,0 +1,169 @@
+//! `manifest.json`: what a database holds and how it was built. Read first on open, and checked
+//! field by field: every count and name that indexes anything is validated before use.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::{CATALOG_FILE, FORMAT_VERSION, GEOMETRY_FILE, MANIFEST_FILE, TREE_FILE};
+use crate::build::BuildParams;
+use crate::error::{Error, Result};
+use crate::grid::ViewGrid;
+use crate::rtree::TreeStats;
+
+/// What the visibility stage measured and wrote.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VisibilityInfo {
+    /// The backend that measured, with its adapter.
+    pub backend: String,
+    /// Cells of the grid this database holds visibility for.
+    pub cells_computed: u64,
+    pub sample_points: u64,
+    /// Objects given the one-texel floor (visible from the cell, seen from no sample point).
+    pub floored_objects: u64,
+    /// Sample points left out because they lie inside geometry.
+    pub skipped_points: u64,
+    pub seconds: f64,
+    pub layouts: Vec<LayoutInfo>,
+}
+
+/// One V-page layout as written.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayoutInfo {
+    pub name: String,
+    pub vpage_bytes: u64,
+    pub index_bytes: u64,
+    pub files: Vec<FileEntry>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Counts {
+    pub objects: u64,
+    pub base_meshes: u64,
+    /// Full-detail faces of every instance.
+    pub triangles: u64,
+    /// Full-detail faces of the base meshes (instances stored once).
+    pub stored_triangles: u64,
+    pub nodes: u64,
+    pub cells: u64,
+    /// Faces over all stored LOD levels (leaf and internal).
+    pub lod_triangles: u64,
+}
+
+/// A file of the database and its size in bytes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FileEntry {
+    pub name: String,
+    pub bytes: u64,
+}
+
+/// `manifest.json`. Its first key, `"hdov": "database"`, is the file's magic.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub hdov: String,
+    pub format_version: u32,
+    pub created_by: String,
+    pub build: BuildParams,
+    pub counts: Counts,
+    pub tree: TreeStats,
+    pub grid: Option<ViewGrid>,
+    pub files: Vec<FileEntry>,
+    pub visibility: Option<VisibilityInfo>,
+}
+
+/// The first two keys of a manifest: enough to tell an hdov database from anything else.
+#[derive(Deserialize)]
+struct Head {
+    hdov: String,
+    format_version: u32,
+}
+
+/// Whether `dir` holds an hdov database of any format version (its `manifest.json` says so).
+/// The one test of what `replace` may overwrite: a user's folder never passes it.
+pub fn is_database(dir: &Path) -> bool {
+    let Ok(bytes) = std::fs::read(dir.join(MANIFEST_FILE)) else { return false };
+    serde_json::from_slice::<Head>(&bytes).is_ok_and(|h| h.hdov == Manifest::MAGIC)
+}
+
+impl Manifest {
+    pub const MAGIC: &'static str = "database";
+
+    /// Reads and validates `DIR/manifest.json` (see [`Manifest::check`]).
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        let path = dir.join(MANIFEST_FILE);
+        let bytes = std::fs::read(&path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => Error::bad_file(dir, "not an hdov database (no manifest.json)"),
+            _ => Error::io(&path, e),
+        })?;
+        let head: Head =
+            serde_json::from_slice(&bytes).map_err(|e| Error::bad_file(&path, format!("not an hdov manifest: {e}")))?;
+        if head.hdov != Self::MAGIC {
+            return Err(Error::bad_file(&path, format!("an hdov '{}' file, not a database manifest", head.hdov)));
+        }
+        if head.format_version != FORMAT_VERSION {
+            return Err(Error::bad_file(
+                &path,
+                format!("database format version {}, this hdov reads version {FORMAT_VERSION}", head.format_version),
+            ));
+        }
+        let m: Manifest =
+            serde_json::from_slice(&bytes).map_err(|e| Error::bad_file(&path, format!("malformed manifest: {e}")))?;
+        m.check(dir).map_err(|r| Error::bad_file(&path, r))?;
+        Ok(m)
+    }
+
+    /// Checks the fields against each other and the files against their recorded sizes, so that
+    /// no later read trusts a number the manifest got wrong. Returns the first violation.
+    fn check(&self, dir: &Path) -> std::result::Result<(), String> {
+        let c = &self.counts;
+        self.build.check(self.grid.as_ref()).map_err(|e| format!("build parameters: {e}"))?;
+        if c.objects == 0 || c.nodes == 0 || c.base_meshes == 0 {
+            return Err(format!("{} objects, {} base meshes, {} nodes: none may be 0", c.objects, c.base_meshes, c.nodes));
+        }
+        if c.objects > u64::from(u32::MAX) || c.nodes > u64::from(u32::MAX) {
+            return Err("more objects or nodes than 32-bit ids can name".into());
+        }
+        if self.tree.nodes as u64 != c.nodes {
+            return Err(format!("tree has {} nodes, counts say {}", self.tree.nodes, c.nodes));
+        }
+        match self.grid {
+            Some(g) if g.cell_count() as u64 != c.cells => {
+                return Err(format!("grid has {} cells, counts say {}", g.cell_count(), c.cells));
+            }
+            None if c.cells != 0 || self.visibility.is_some() => return Err("visibility without a grid".into()),
+            _ => {}
+        }
+        if self.build.visibility.is_some() != self.visibility.is_some() {
+            return Err("visibility parameters and results disagree".into());
+        }
+        let mut expected: Vec<&FileEntry> = self.files.iter().collect();
+        for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
+            if !self.files.iter().any(|f| f.name == name) {
+                return Err(format!("lists no {name}"));
+            }
+        }
+        if let (Some(v), Some(params)) = (&self.visibility, &self.build.visibility) {
+            if v.cells_computed > c.cells {
+                return Err(format!("{} cells computed of {}", v.cells_computed, c.cells));
+            }
+            let names: Vec<&str> = v.layouts.iter().map(|l| l.name.as_str()).collect();
+            let built: Vec<String> = params.layouts.iter().map(|k| k.to_string()).collect();
+            if names != built {
+                return Err(format!("layouts {names:?} differ from those built, {built:?}"));
+            }
+            expected.extend(v.layouts.iter().flat_map(|l| &l.files));
+        }
+        // A file shorter or longer than written was truncated or replaced: say so by name
+        // before any reader trips over it.
+        for f in expected {
+            if f.name.is_empty() || f.name.contains(['/', '\\']) || f.name == ".." {
+                return Err(format!("file name '{}' is not a plain name", f.name));
+            }
+            let bytes = std::fs::metadata(dir.join(&f.name)).map_err(|e| format!("{}: {e}", f.name))?.len();
+            if bytes != f.bytes {
+                return Err(format!("{} has {bytes} bytes, {} were written", f.name, f.bytes));
+            }
+        }
+        Ok(())
+    }
+}
