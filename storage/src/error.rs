@@ -35,8 +35,12 @@ pub enum Error {
     #[error("{path}: {reason}")]
     Corrupt { path: String, reason: String },
     /// A target that exists and may not be overwritten.
-    #[error("{path}: exists; pass --force to overwrite")]
+    #[error("{path}: exists")]
     Exists { path: String },
+    /// A target that may be replaced only if it is ours, and is not: a directory of other files,
+    /// a regular file, a symlink.
+    #[error("{path}: not an hdov database or an empty directory; refusing to replace it")]
+    NotOurs { path: String },
     /// A request the file cannot answer (a page or record outside it, a payload too large, ...).
     #[error("{path}: {reason}")]
     Invalid { path: String, reason: String },
