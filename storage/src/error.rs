@@ -37,7 +37,8 @@ pub enum Error {
     /// A target that exists and may not be overwritten.
     #[error("{path}: exists")]
     Exists { path: String },
-    /// A target that is neither ours nor empty: never replaced.
+    /// A target that may be replaced only if it is ours, and is not: a directory of other files,
+    /// a regular file, a symlink.
     #[error("{path}: not an hdov database or an empty directory; refusing to replace it")]
     NotOurs { path: String },
     /// A request the file cannot answer (a page or record outside it, a payload too large, ...).

@@ -7,7 +7,7 @@
 //! - [`vpage`]: V-entries and their encodings (f32 or log-scale u16 DoV);
 //! - [`layout`]: the horizontal, vertical and indexed-vertical V-page layouts and their reader;
 //! - [`synthetic`]: reproducible synthetic V-data for tests, benchmarks and size tables;
-//! - [`atomic`]: a database directory is written beside its target and renamed into place.
+//! - [`atomic`]: a database directory is written beside its target and swapped into place.
 //!
 //! Every decoder checks bounds and checksums: a corrupted file gives an [`Error`], never a panic.
 
