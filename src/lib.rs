@@ -49,6 +49,7 @@ pub mod geom;
 pub mod grid;
 pub mod lod;
 pub mod progress;
+pub mod record;
 pub mod rtree;
 pub mod scene;
 

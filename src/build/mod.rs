@@ -90,8 +90,7 @@ pub fn build(
         chain
             .iter()
             .map(|level| {
-                let bytes = bincode::serde::encode_to_vec(&level.mesh, bincode::config::standard())
-                    .map_err(|e| Error::bad_file(dir.join(GEOMETRY_FILE), e.to_string()))?;
+                let bytes = crate::record::encode(&level.mesh, &dir.join(GEOMETRY_FILE))?;
                 let r = geometry.append(&bytes)?;
                 Ok(LodRef { faces: level.faces() as u32, error: level.error, offset: r.offset, len: r.len })
             })
@@ -128,8 +127,7 @@ pub fn build(
         node_lods,
     };
     let mut cat = BlobWriter::create(&dir.join(CATALOG_FILE), CATALOG_KIND)?;
-    let bytes = bincode::serde::encode_to_vec(&catalog, bincode::config::standard())
-        .map_err(|e| Error::bad_file(dir.join(CATALOG_FILE), e.to_string()))?;
+    let bytes = crate::record::encode(&catalog, &dir.join(CATALOG_FILE))?;
     cat.append(&bytes)?;
     cat.finish()?;
 

@@ -62,11 +62,12 @@ impl Database {
         let geometry = BlobFile::open(&dir.join(GEOMETRY_FILE), GEOMETRY_KIND)?;
         let catalog_file = BlobFile::open(&dir.join(CATALOG_FILE), CATALOG_KIND)?;
         let catalog_path = dir.join(CATALOG_FILE);
-        let record =
-            catalog_file.iter().next().ok_or_else(|| Error::bad_file(&catalog_path, "holds no catalog record"))??;
-        let (catalog, _): (Catalog, usize) =
-            bincode::serde::decode_from_slice(record.1, bincode::config::standard())
-                .map_err(|e| Error::bad_file(&catalog_path, format!("malformed catalog: {e}")))?;
+        let mut records = catalog_file.iter();
+        let record = records.next().ok_or_else(|| Error::bad_file(&catalog_path, "holds no catalog record"))??;
+        if records.next().is_some() {
+            return Err(Error::bad_file(&catalog_path, "holds more than one catalog record"));
+        }
+        let catalog: Catalog = crate::record::decode(record.1, &catalog_path, "catalog")?;
         let nodes = manifest.counts.nodes;
         if tree.page_count() != nodes {
             return Err(Error::bad_file(
@@ -152,8 +153,7 @@ impl Database {
     /// Loads one LOD mesh from `geometry.blob` (checksum verified).
     pub fn lod_mesh(&self, lod: &LodRef) -> Result<Mesh> {
         let bytes = self.geometry.get(lod.blob())?;
-        let (mesh, _): (Mesh, usize) = bincode::serde::decode_from_slice(bytes, bincode::config::standard())
-            .map_err(|e| Error::bad_file(self.dir.join(GEOMETRY_FILE), format!("malformed mesh record: {e}")))?;
+        let mesh: Mesh = crate::record::decode(bytes, &self.dir.join(GEOMETRY_FILE), "mesh record")?;
         mesh.check().map_err(|r| Error::bad_file(self.dir.join(GEOMETRY_FILE), r))?;
         Ok(mesh)
     }

@@ -112,8 +112,7 @@ pub fn write(scene: &Scene, path: &Path, replace: bool) -> Result<()> {
     replace_file(&meshes_path, |temp| {
         let mut blobs = BlobWriter::create(temp, MESHES_KIND)?;
         for m in &scene.meshes {
-            let bytes = bincode::serde::encode_to_vec(&m.mesh, bincode::config::standard())
-                .map_err(|e| Error::bad_file(&meshes_path, format!("encoding mesh '{}': {e}", m.name)))?;
+            let bytes = crate::record::encode(&m.mesh, &meshes_path)?;
             blobs.append(&bytes)?;
         }
         blobs.finish()?;
@@ -163,9 +162,7 @@ fn read_meshes(path: &Path) -> Result<Vec<Mesh>> {
     file.iter()
         .map(|record| {
             let (_, bytes) = record?;
-            let (mesh, _) = bincode::serde::decode_from_slice(bytes, bincode::config::standard())
-                .map_err(|e| Error::bad_file(path, format!("decoding a mesh: {e}")))?;
-            Ok(mesh)
+            crate::record::decode(bytes, path, "mesh")
         })
         .collect()
 }
