@@ -16,6 +16,10 @@ pub struct ViewGrid {
 }
 
 impl ViewGrid {
+    /// Most cells a grid may have (the thesis's city had about 4,000): every cell id fits a
+    /// u32 with room to spare, and a mistyped grid is refused instead of allocated.
+    pub const MAX_CELLS: u64 = 1 << 22;
+
     pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
         Self { region, dims }
     }
@@ -41,9 +45,13 @@ impl ViewGrid {
         let dims = match (dims, cell_size) {
             (Some(d), _) => d,
             (None, Some(s)) if s > 0.0 && s.is_finite() => {
-                // f32 → u32 saturates: a tiny cell size gives u32::MAX cells, refused below.
-                let n = |x: f32| ((f64::from(x) / f64::from(s)).ceil() as u32).max(1);
-                [n(e.x), 1, n(e.z)]
+                let n = |x: f32| (f64::from(x) / f64::from(s)).ceil().max(1.0);
+                let cells = n(e.x) * n(e.z);
+                if cells > Self::MAX_CELLS as f64 {
+                    let reason = format!("{s} cuts the region into {cells:.0} cells, more than {}", Self::MAX_CELLS);
+                    return Err(Error::bad_param("cell_size", reason));
+                }
+                [n(e.x) as u32, 1, n(e.z) as u32]
             }
             (None, Some(s)) => return Err(Error::bad_param("cell_size", format!("{s} must be a positive length"))),
             (None, None) => match scene_grid {

@@ -43,8 +43,109 @@ fn generate_build_info_round_trip() {
     assert_eq!(info["grid"]["region"].as_array().unwrap().len(), 6);
     // A second build to the same place is refused, and the first database still opens.
     let o = hdov(&["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap()]);
-    assert_refused(&o, "--force");
+    assert_refused(&o, "exists; pass --force to replace it");
     assert!(hdov(&["info", db.to_str().unwrap()]).status.success());
+}
+
+/// `--force` replaces an hdov database or an empty folder, and nothing else: a user's folder,
+/// a file, or the scene's own folder is refused in one line and left as it was.
+#[test]
+fn force_never_replaces_what_is_not_ours() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city")]).status.success());
+    let scene = s("city/city.json");
+    let fast = ["--no-visibility", "--force"];
+    std::fs::create_dir(s("mine")).unwrap();
+    std::fs::write(s("mine/thesis.tex"), b"years of work").unwrap();
+    std::fs::write(s("notes.txt"), b"notes").unwrap();
+    for target in ["mine", "notes.txt", "city"] {
+        let o = hdov(&[&["build", scene.as_str(), "--out", &s(target)][..], &fast[..]].concat());
+        assert_refused(&o, "not an hdov database or an empty directory");
+    }
+    assert_eq!(std::fs::read(s("mine/thesis.tex")).unwrap(), b"years of work");
+    assert_eq!(std::fs::read(s("notes.txt")).unwrap(), b"notes");
+    assert!(hdov(&["info", &s("city")]).status.code() == Some(2), "the scene folder is not a database");
+    assert!(hdov(&["build", &scene, "--out", &s("city2"), "--no-visibility"]).status.success());
+    let o = hdov(&["merge", &s("city2"), "--out", &s("mine"), "--force"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(std::fs::read(s("mine/thesis.tex")).unwrap(), b"years of work");
+    // An empty folder and an earlier database are replaced.
+    std::fs::create_dir(s("empty")).unwrap();
+    for target in ["empty", "city2"] {
+        let o = hdov(&[&["build", scene.as_str(), "--out", &s(target)][..], &fast[..]].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    // generate --force replaces a generated scene only; demo refuses a folder it did not write.
+    std::fs::write(s("mine/city.json"), b"{\"mine\": true}").unwrap();
+    assert_refused(&hdov(&["generate", "city", "--scale", "tiny", "--out", &s("mine"), "--force"]), "city.json");
+    assert_eq!(std::fs::read(s("mine/city.json")).unwrap(), b"{\"mine\": true}");
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city"), "--force"]).status.success());
+    assert_refused(&hdov(&["demo", "--out", &s("mine")]), "thesis.tex");
+    assert_eq!(std::fs::read(s("mine/thesis.tex")).unwrap(), b"years of work");
+}
+
+/// Coordinates below zero are values, not flags; argument errors are one line like all others.
+#[test]
+fn negative_coordinates_and_one_line_argument_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let obj = tmp.path().join("centred.obj");
+    let mut text = String::new();
+    for (i, x) in [-15.0f32, -5.0, 5.0].iter().enumerate() {
+        text += &format!("g box{i}\nv {x} 0 -1\nv {} 0 -1\nv {x} 3 -1\nv {} 3 -1\nf -4 -3 -1 -2\n", x + 2.0, x + 2.0);
+    }
+    std::fs::write(&obj, text).unwrap();
+    let (obj, db) = (obj.to_str().unwrap(), tmp.path().join("db"));
+    let db = db.to_str().unwrap();
+    let o =
+        hdov(&["build", obj, "--out", db, "--region", "-20,1.5,-10,0,2,10", "--grid", "2x1x2", "--resolution", "16"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", db, "--json"]).stdout).unwrap();
+    assert_eq!(info["grid"]["region"], serde_json::json!([-20.0, 1.5, -10.0, 0.0, 2.0, 10.0]));
+    let o = hdov(&["dov", obj, "--at", "-10,1.7,0", "--backend", "cpu", "--resolution", "32", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dov: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let at: Vec<f32> = dov["at"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
+    assert_eq!(at, [-10.0, 1.7, 0.0]);
+    assert_refused(&hdov(&["build"]), "SCENE");
+    assert_refused(&hdov(&["build", obj, "--out", db, "--frobnicate"]), "--frobnicate");
+    assert_refused(&hdov(&["build", obj, "--out", db, "--grid", "0x1x1"]), "--grid");
+    assert_refused(&hdov(&["dov", obj, "--at", "-10,1.7"]), "--at");
+    assert_refused(&hdov(&["nonsense"]), "nonsense");
+    assert!(hdov(&["--help"]).status.success() && hdov(&["--version"]).status.success());
+}
+
+/// Every bound is checked before any work: a refused build leaves nothing behind.
+#[test]
+fn out_of_bounds_arguments_are_refused_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city")]).status.success());
+    let scene = s("city/city.json");
+    let out = s("db");
+    for (args, flag) in [
+        (&["--grid", "100000x1x100000"][..], "--grid"),
+        (&["--grid", "4294967295x4294967295x4294967295"], "--grid"),
+        (&["--cell-size", "0.00001"], "--cell-size"),
+        (&["--cell-size", "-3"], "--cell-size"),
+        (&["--samples", "100000"], "--samples"),
+        (&["--grid", "2000x1x2000", "--samples", "64"], "--samples"),
+        (&["--resolution", "0"], "--resolution"),
+        (&["--resolution", "1000000"], "--resolution"),
+        (&["--page-size", "50"], "--page-size"),
+        (&["--page-size", "99999999"], "--page-size"),
+        (&["--lod-draw-tolerance", "-1"], "--lod-draw-tolerance"),
+        (&["--zero-dov-floor", "box:-2"], "--zero-dov-floor"),
+        (&["--zero-dov-floor", "walls"], "--zero-dov-floor"),
+        (&["--shard", "3/3"], "--shard"),
+        (&["--layouts", "vertical,vertical"], "--layouts"),
+    ] {
+        let o = hdov(&[&["build", scene.as_str(), "--out", out.as_str()][..], args].concat());
+        assert_refused(&o, flag);
+    }
+    assert_refused(&hdov(&["generate", "city", "--blocks", "1000x1000", "--out", &s("big")]), "--blocks");
+    let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("city")], "nothing but the scene");
 }
 
 #[test]
@@ -194,20 +295,61 @@ fn shards_merge_into_the_whole_database() {
     }
     let o = hdov(&["merge", &s("shard0"), &s("shard2"), &s("shard1"), "--out", &s("merged")]);
     assert!(o.status.success(), "{}", stderr(&o));
-    for f in [
-        "tree.pages",
-        "vpages.horizontal",
-        "vindex.vertical",
-        "vpages.vertical",
-        "vindex.indexed-vertical",
-        "vpages.indexed-vertical",
-    ] {
+    // Every file but the manifest is identical, byte for byte. The manifest differs in what
+    // the shards measured, not what they stored: build seconds, and sample points (each shard
+    // also measures the corners it shares with its neighbours' cells).
+    let names = |dir: &str| {
+        let mut v: Vec<String> = std::fs::read_dir(tmp.path().join(dir))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(names("whole"), names("merged"));
+    assert_eq!(names("whole").len(), 9, "{:?}", names("whole"));
+    for f in names("whole").iter().filter(|f| *f != "manifest.json") {
         let (a, b) = (
             std::fs::read(tmp.path().join("whole").join(f)).unwrap(),
             std::fs::read(tmp.path().join("merged").join(f)).unwrap(),
         );
         assert!(a == b, "{f} differs between the merged and the whole build");
     }
+    let manifest = |dir: &str| -> serde_json::Value {
+        let mut m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(tmp.path().join(dir).join("manifest.json")).unwrap()).unwrap();
+        let v = m["visibility"].as_object_mut().unwrap();
+        let measured = (v.remove("seconds").unwrap(), v.remove("sample_points").unwrap());
+        assert!(measured.0.as_f64().unwrap() > 0.0);
+        m
+    };
+    assert_eq!(manifest("whole"), manifest("merged"));
+    // Damaged or forged shards are refused in one line, never a panic.
+    let forge = |from: &str, to: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        let (src, dst) = (tmp.path().join(from), tmp.path().join(to));
+        std::fs::create_dir(&dst).unwrap();
+        for e in std::fs::read_dir(&src).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+        }
+        let path = dst.join("manifest.json");
+        let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        edit(&mut m);
+        std::fs::write(&path, serde_json::to_vec(&m).unwrap()).unwrap();
+    };
+    forge("shard1", "bad-index", &|m| m["build"]["visibility"]["shard"] = serde_json::json!([7, 3]));
+    forge("shard1", "huge-count", &|m| m["build"]["visibility"]["shard"] = serde_json::json!([1, 4_000_000_000u32]));
+    forge("shard1", "no-vis", &|m| m["visibility"] = serde_json::Value::Null);
+    for (bad, why) in [("bad-index", "0 ≤ I < N"), ("huge-count", "more shards than"), ("no-vis", "disagree")] {
+        assert_refused(&hdov(&["merge", &s("shard0"), &s(bad), &s("shard2"), "--out", &s("m6")]), why);
+    }
+    forge("shard2", "broken-file", &|_| {});
+    std::fs::write(tmp.path().join("broken-file/vpages.vertical"), b"HDOVPAGE").unwrap();
+    assert_refused(
+        &hdov(&["merge", &s("shard0"), &s("shard1"), &s("broken-file"), "--out", &s("m7")]),
+        "vpages.vertical",
+    );
+    assert!(!tmp.path().join("m6").exists() && !tmp.path().join("m7").exists());
     assert_refused(&hdov(&["merge", &s("shard0"), &s("shard1"), "--out", &s("m2")]), "shard 2/3 is missing");
     assert_refused(&hdov(&["merge", &s("shard0"), &s("shard0"), &s("shard1"), "--out", &s("m3")]), "as is");
     assert_refused(&hdov(&["merge", &s("whole"), "--out", &s("m4")]), "not a shard");

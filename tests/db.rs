@@ -7,9 +7,9 @@ use std::path::Path;
 use glam::{Mat4, Vec3};
 use hdov::scene::{BaseMesh, Object, Scene};
 
-use hdov::{BuildParams, Database};
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
+use hdov::{BuildParams, Database};
 
 /// A small town: `n × n` boxes of varied height, each its own base mesh, and a sphere instanced
 /// on every other street corner (so instancing is exercised).

@@ -2,11 +2,11 @@
 //! V-entries, and those are exactly what the DoV precompute produced.
 
 use hdov::city::{CityParams, CityScale};
-use hdov::{BuildParams, Database, VisibilityParams};
 use hdov::dov::BackendKind;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::progress::Progress;
 use hdov::rtree::RTree;
+use hdov::{BuildParams, Database, VisibilityParams};
 use hdov_storage::{LayoutKind, ReadMode};
 use proptest::prelude::*;
 

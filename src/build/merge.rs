@@ -76,10 +76,16 @@ pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> 
     };
     for s in &dbs {
         if s.shard.count != count || !same_build(s) {
-            return Err(Error::bad_param(s.name(), format!("was built with other parameters than {}", first_path.display())));
+            return Err(Error::bad_param(
+                s.name(),
+                format!("was built with other parameters than {}", first_path.display()),
+            ));
         }
         if checksums(&s.db)? != reference {
-            return Err(Error::bad_param(s.name(), format!("holds another scene or tree than {}", first_path.display())));
+            return Err(Error::bad_param(
+                s.name(),
+                format!("holds another scene or tree than {}", first_path.display()),
+            ));
         }
         // `index < count` holds for every shard read (checked on open), and count is shared.
         if let Some(other) = seen[s.shard.index as usize].replace(s.db.dir()) {

@@ -42,6 +42,9 @@ pub struct BuildReport {
     pub write_seconds: f64,
     /// Leftovers of builds that died (temporary folders beside the target), removed.
     pub cleaned: Vec<PathBuf>,
+    /// A database that a build which died mid-replace had moved aside, put back before this
+    /// build began (only where directories cannot be swapped atomically).
+    pub restored: Option<PathBuf>,
 }
 
 /// Claims `out` for writing: refuses an existing `out` unless `replace` and it is an hdov
@@ -70,7 +73,7 @@ pub fn build(
     let fanout = tree_page::fanout(params.page_size);
     // Claim the target first: a refusal must come before minutes of work, not after.
     let txn = begin_write(out, replace)?;
-    let cleaned = txn.cleaned().to_vec();
+    let (cleaned, restored) = (txn.cleaned().to_vec(), txn.restored().map(Path::to_path_buf));
 
     let t = Instant::now();
     let boxes = scene.all_object_bounds();
@@ -164,7 +167,7 @@ pub fn build(
     }
     write_manifest(&dir, &manifest)?;
     txn.commit()?;
-    Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned })
+    Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned, restored })
 }
 
 /// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.

@@ -18,8 +18,8 @@ use hdov_storage::{DovCodec, LayoutKind};
 /// Upper bounds of a build. They keep every count inside its on-disk integer and a mistyped
 /// argument from asking for days of work or an allocation the machine cannot make.
 pub mod limits {
-    /// Viewing cells of a grid (the thesis's city had about 4,000).
-    pub const MAX_CELLS: u64 = 1 << 22;
+    /// Viewing cells of a grid.
+    pub const MAX_CELLS: u64 = crate::grid::ViewGrid::MAX_CELLS;
     /// Sample points a build measures: grid corners plus interior points of every cell.
     pub const MAX_SAMPLE_POINTS: u64 = 1 << 26;
     /// Interior sample points per cell.
@@ -148,6 +148,10 @@ impl BuildParams {
         }
         if let Some(s) = v.shard {
             Shard::new(s.index, s.count).map_err(|r| Error::bad_param("shard", r))?;
+            let cells = grid.map_or(MAX_CELLS, |g| g.cell_count() as u64);
+            if u64::from(s.count) > cells {
+                return Err(Error::bad_param("shard", format!("{s}: more shards than the {cells} cells")));
+            }
         }
         if let Some(g) = grid {
             check_grid(g, v.interior_samples)?;
@@ -175,7 +179,9 @@ pub fn check_grid(grid: &ViewGrid, interior_samples: u32) -> Result<()> {
     if points > MAX_SAMPLE_POINTS {
         return Err(Error::bad_param(
             "interior_samples",
-            format!("{nx}x{ny}x{nz} cells with {interior_samples} interior points each is {points} sample points, more than {MAX_SAMPLE_POINTS}"),
+            format!(
+                "{nx}x{ny}x{nz} cells with {interior_samples} interior points each is {points} sample points, more than {MAX_SAMPLE_POINTS}"
+            ),
         ));
     }
     Ok(())

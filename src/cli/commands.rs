@@ -69,7 +69,7 @@ pub struct BuildArgs {
     #[arg(long, value_parser = parse_dims::<3>, conflicts_with = "cell_size")]
     grid: Option<[u32; 3]>,
     /// Cell edge length along x and z (one height layer).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     cell_size: Option<f32>,
     /// Bytes per tree node page; the fan-out follows from it.
     #[arg(long, default_value_t = 4096)]
@@ -110,7 +110,7 @@ pub struct VisibilityArgs {
     /// GPU backend: draw an object at a coarser LOD when its simplification error, seen from the
     /// sample point, is below this many texels (0 = always full detail). 0.05 keeps every
     /// object's DoV within 0.5 % + 2 texels of full detail (docs/dov.md); the CPU backend ignores it.
-    #[arg(long, default_value_t = hdov::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS)]
+    #[arg(long, default_value_t = hdov::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS, allow_negative_numbers = true)]
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
@@ -230,7 +230,7 @@ pub fn build(a: BuildArgs) -> Result<()> {
     }
     scene.grid = Some(ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)?);
     let report = hdov::build(&scene, &a.out, &params, a.force, &Progress::for_terminal(a.json))?;
-    report_cleaned(&report.cleaned);
+    report_cleaned(&report);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).expect("serialisable"));
     } else {
@@ -261,9 +261,12 @@ fn print_build(out: &Path, r: &BuildReport) {
     println!("  time: tree {:.2} s, LODs {:.2} s, write {:.2} s", r.tree_seconds, r.lod_seconds, r.write_seconds);
 }
 
-/// Says which leftovers of dead builds were removed (on stderr: stdout may be JSON).
-fn report_cleaned(cleaned: &[PathBuf]) {
-    for p in cleaned {
+/// Says which leftovers of dead builds were removed or put back (on stderr: stdout may be JSON).
+fn report_cleaned(report: &BuildReport) {
+    if let Some(p) = &report.restored {
+        eprintln!("note: put back {}, moved aside by a build that did not finish", p.display());
+    }
+    for p in &report.cleaned {
         eprintln!("note: removed {}, left by a build that did not finish", p.display());
     }
 }
@@ -385,7 +388,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         );
     }
     let report = hdov::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
-    report_cleaned(&report.cleaned);
+    report_cleaned(&report);
     if a.json {
         let doc = json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()});
         println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));

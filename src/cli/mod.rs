@@ -64,13 +64,19 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// clap's error as one line: its first line without the `error: ` prefix and styling, plus the
-/// usage hint clap would have printed below it.
+/// clap's error as one line: its first paragraph (the message and what it lists, e.g. the
+/// missing arguments) joined, without the `error: ` prefix, the usage and the tips.
 fn clap_one_line(e: &clap::Error) -> String {
     let text = e.render().to_string();
-    let first = text.lines().next().unwrap_or("invalid arguments").trim();
-    let first = first.strip_prefix("error: ").unwrap_or(first);
-    format!("{first} (see hdov --help)")
+    let message: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .take_while(|l| !l.is_empty() && !l.starts_with("Usage:"))
+        .filter(|l| !l.starts_with("tip:"))
+        .collect();
+    let message = message.join(" ");
+    let message = message.strip_prefix("error: ").unwrap_or(&message);
+    format!("{message} (see hdov --help)")
 }
 
 /// The library's error in the command's words: parameters become the flags that set them, and

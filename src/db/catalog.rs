@@ -62,8 +62,13 @@ impl Catalog {
             if chain.is_empty() {
                 return Err("an empty LOD chain".into());
             }
-            if let Some(l) = chain.iter().find(|l| l.offset.checked_add(u64::from(l.len)).is_none_or(|e| e > geometry_len)) {
-                return Err(format!("LOD at byte {} (+{}) lies outside geometry.blob ({geometry_len} bytes)", l.offset, l.len));
+            if let Some(l) =
+                chain.iter().find(|l| l.offset.checked_add(u64::from(l.len)).is_none_or(|e| e > geometry_len))
+            {
+                return Err(format!(
+                    "LOD at byte {} (+{}) lies outside geometry.blob ({geometry_len} bytes)",
+                    l.offset, l.len
+                ));
             }
             if chain.windows(2).any(|w| w[1].faces > w[0].faces) || chain[0].faces == 0 {
                 return Err("a LOD chain that is not finest first or has an empty level".into());

@@ -118,7 +118,10 @@ impl Manifest {
         let c = &self.counts;
         self.build.check(self.grid.as_ref()).map_err(|e| format!("build parameters: {e}"))?;
         if c.objects == 0 || c.nodes == 0 || c.base_meshes == 0 {
-            return Err(format!("{} objects, {} base meshes, {} nodes: none may be 0", c.objects, c.base_meshes, c.nodes));
+            return Err(format!(
+                "{} objects, {} base meshes, {} nodes: none may be 0",
+                c.objects, c.base_meshes, c.nodes
+            ));
         }
         if c.objects > u64::from(u32::MAX) || c.nodes > u64::from(u32::MAX) {
             return Err("more objects or nodes than 32-bit ids can name".into());

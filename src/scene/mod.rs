@@ -56,9 +56,8 @@ impl Mesh {
     /// Returns the reason of the first violation.
     /// The cube [-0.5, 0.5]³: 8 vertices, 12 triangles, counter-clockwise seen from outside.
     pub fn unit_cube() -> Mesh {
-        let positions: Vec<[f32; 3]> = (0..8)
-            .map(|i: u32| [i & 1, i & 2, i & 4].map(|bit| if bit == 0 { -0.5 } else { 0.5 }))
-            .collect();
+        let positions: Vec<[f32; 3]> =
+            (0..8).map(|i: u32| [i & 1, i & 2, i & 4].map(|bit| if bit == 0 { -0.5 } else { 0.5 })).collect();
         let quads: [[u32; 4]; 6] = [
             [0, 4, 6, 2], // -x
             [1, 3, 7, 5], // +x
