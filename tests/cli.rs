@@ -340,7 +340,9 @@ fn shards_merge_into_the_whole_database() {
     forge("shard1", "bad-index", &|m| m["build"]["visibility"]["shard"] = serde_json::json!([7, 3]));
     forge("shard1", "huge-count", &|m| m["build"]["visibility"]["shard"] = serde_json::json!([1, 4_000_000_000u32]));
     forge("shard1", "no-vis", &|m| m["visibility"] = serde_json::Value::Null);
-    for (bad, why) in [("bad-index", "0 ≤ I < N"), ("huge-count", "more shards than"), ("no-vis", "disagree")] {
+    for (bad, why) in
+        [("bad-index", "0 ≤ I < N"), ("huge-count", "more shards than"), ("no-vis", "holds no visibility")]
+    {
         assert_refused(&hdov(&["merge", &s("shard0"), &s(bad), &s("shard2"), "--out", &s("m6")]), why);
     }
     forge("shard2", "broken-file", &|_| {});

@@ -84,13 +84,32 @@ fn existing_database_is_kept_without_force_and_replaced_with_it() {
     build(&dir, &BuildParams::default());
     let scene = town(3);
     let err = hdov::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
-    assert!(err.to_string().contains("--force"), "{err}");
+    assert_eq!(err.to_string(), format!("{}: exists", dir.display()), "the library names no flag");
     assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, town(8).objects.len());
     hdov::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
     assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, scene.objects.len());
     // No temporary directory is left beside the target.
     let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names.len(), 1, "{names:?}");
+}
+
+/// A mesh with no triangles has no box: it is refused before any work, and nothing is written.
+#[test]
+fn empty_meshes_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("db");
+    for empty in [hdov::scene::Mesh::default(), hdov::scene::Mesh { positions: vec![[0.0; 3]; 3], indices: vec![] }] {
+        let mut scene = town(2);
+        scene.meshes.push(BaseMesh { name: "hollow".into(), mesh: empty });
+        scene.objects.push(Object {
+            name: "ghost".into(),
+            mesh: scene.meshes.len() as u32 - 1,
+            transform: Mat4::IDENTITY,
+        });
+        let err = hdov::build(&scene, &out, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
+        assert!(err.to_string().starts_with("scene: mesh 'hollow': no triangles"), "{err}");
+        assert!(std::fs::read_dir(tmp.path()).unwrap().next().is_none(), "nothing written");
+    }
 }
 
 /// Copies a database and applies `damage` to one of its files.

@@ -146,7 +146,8 @@ pub fn build(
         hdov: Manifest::MAGIC.into(),
         format_version: FORMAT_VERSION,
         created_by: format!("hdov {}", env!("CARGO_PKG_VERSION")),
-        build: params.clone(),
+        // What was built: without a grid there is no visibility to have parameters for.
+        build: BuildParams { visibility: visibility.as_ref().and(params.visibility.clone()), ..params.clone() },
         counts: Counts {
             objects: scene.objects.len() as u64,
             base_meshes: scene.meshes.len() as u64,

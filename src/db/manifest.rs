@@ -136,8 +136,8 @@ impl Manifest {
             None if c.cells != 0 || self.visibility.is_some() => return Err("visibility without a grid".into()),
             _ => {}
         }
-        if self.build.visibility.is_some() != self.visibility.is_some() {
-            return Err("visibility parameters and results disagree".into());
+        if self.visibility.is_some() && self.build.visibility.is_none() {
+            return Err("visibility results without their parameters".into());
         }
         let mut expected: Vec<&FileEntry> = self.files.iter().collect();
         for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
@@ -163,7 +163,10 @@ impl Manifest {
                 return Err(format!("file name '{}' is not a plain name", f.name));
             }
             let bytes = std::fs::metadata(dir.join(&f.name)).map_err(|e| format!("{}: {e}", f.name))?.len();
-            if bytes != f.bytes {
+            if bytes < f.bytes {
+                return Err(format!("{} is truncated: {bytes} bytes of the {} written", f.name, f.bytes));
+            }
+            if bytes > f.bytes {
                 return Err(format!("{} has {bytes} bytes, {} were written", f.name, f.bytes));
             }
         }
