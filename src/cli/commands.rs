@@ -355,7 +355,10 @@ fn check_demo_dir(out: &Path) -> Result<()> {
     for entry in entries {
         let entry = entry.map_err(|e| Error::io(out, e))?;
         let name = entry.file_name();
-        if !DEMO_FILES.iter().any(|f| name == *f) {
+        let name_s = name.to_string_lossy();
+        // `.city.hdov.tmp-PID` and the like: what a killed demo left while writing its files.
+        let leftover = DEMO_FILES.iter().any(|f| name_s.starts_with(&format!(".{f}.")));
+        if !leftover && !DEMO_FILES.iter().any(|f| name == *f) {
             return Err(Error::bad_file(
                 out,
                 format!("holds '{}', which the demo did not write; choose another --out", name.to_string_lossy()),

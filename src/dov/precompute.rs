@@ -189,7 +189,7 @@ impl FloorTest {
 impl std::fmt::Display for FloorTest {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match *self {
-            FloorTest::BoxWithin(m) if m == 0.0 => f.write_str("box"),
+            FloorTest::BoxWithin(0.0) => f.write_str("box"),
             FloorTest::BoxWithin(m) => write!(f, "box:{m}"),
             FloorTest::NeighbourCorners => f.write_str("neighbours"),
         }
