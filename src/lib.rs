@@ -49,6 +49,7 @@ pub mod geom;
 pub mod grid;
 pub mod lod;
 pub mod progress;
+pub mod query;
 pub mod record;
 pub mod rtree;
 pub mod scene;
@@ -57,4 +58,5 @@ pub use build::{BuildParams, BuildReport, VisibilityParams, build, merge::merge}
 pub use db::Database;
 pub use db::info::Info;
 pub use error::{Error, Result};
+pub use query::{Answer, Item, ItemKind, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
 pub use scene::Scene;

@@ -101,6 +101,19 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
     SceneLods { leaf, internal }
 }
 
+/// The one rule that picks a level of a LOD chain (thesis eq. 5.5 and 5.6): interpolate in
+/// face count, `k·faces(finest) + (1 − k)·faces(coarsest)` with `k` clamped to [0, 1], and
+/// take the stored level nearest to it (the finer one on a tie). `faces(i)` gives level i's
+/// faces, finest first; `levels` ≥ 1. O(levels).
+pub fn pick_level(levels: usize, faces: impl Fn(usize) -> u64, k: f64) -> usize {
+    let last = levels.saturating_sub(1);
+    let k = if k.is_nan() { 0.0 } else { k.clamp(0.0, 1.0) };
+    let target = k * faces(0) as f64 + (1.0 - k) * faces(last) as f64;
+    (0..=last)
+        .min_by(|&a, &b| (faces(a) as f64 - target).abs().total_cmp(&(faces(b) as f64 - target).abs()))
+        .unwrap_or(0)
+}
+
 /// The coarsest internal LOD of a child node, built in an earlier (lower) level pass.
 fn coarsest_internal(internal: &[Vec<LodLevel>], child: usize) -> &LodLevel {
     internal[child].last().expect("children are simplified before their parent")

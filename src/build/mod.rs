@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::db::catalog::{Catalog, LodRef, ObjectRecord};
+use crate::db::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
 use crate::db::tree_page::{self, NodePage};
 use crate::db::{
     CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
@@ -70,7 +70,7 @@ pub fn build(
 ) -> Result<BuildReport> {
     scene.check().map_err(|r| Error::bad_param("scene", r))?;
     params.check(scene.grid.as_ref())?;
-    let fanout = tree_page::fanout(params.page_size);
+    let fanout = params.max_entries();
     // Claim the target first: a refusal must come before minutes of work, not after.
     let txn = begin_write(out, replace)?;
     let (cleaned, restored) = (txn.cleaned().to_vec(), txn.restored().map(Path::to_path_buf));
@@ -126,6 +126,7 @@ pub fn build(
             .map(|o| ObjectRecord { name: o.name.clone(), mesh: o.mesh, transform: o.transform.to_cols_array() })
             .collect(),
         mesh_names: scene.meshes.iter().map(|m| m.name.clone()).collect(),
+        node_shapes: node_shapes(&tree, scene, &mesh_lods, &node_lods),
         mesh_lods,
         node_lods,
     };
@@ -169,6 +170,43 @@ pub fn build(
     write_manifest(&dir, &manifest)?;
     txn.commit()?;
     Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned, restored })
+}
+
+/// The view-invariant inputs of the query's stop rule, per node (see [`NodeShape`]).
+fn node_shapes(tree: &RTree, scene: &Scene, mesh_lods: &[Vec<LodRef>], node_lods: &[Vec<LodRef>]) -> Vec<NodeShape> {
+    let leaves = tree.subtree_leaf_counts();
+    let objects = tree.subtree_object_counts();
+    let finest = |chain: &[LodRef]| chain.first().map_or(0, |l| u64::from(l.faces));
+    let coarsest = |o: u32| mesh_lods[scene.objects[o as usize].mesh as usize].last().map_or(0, |l| u64::from(l.faces));
+    // Children have larger ids than their parents: one reverse sweep sums bottom-up.
+    let mut coarse = vec![0u64; tree.nodes.len()];
+    for (id, node) in tree.nodes.iter().enumerate().rev() {
+        coarse[id] = match node.is_leaf() {
+            true => node.entries.iter().map(|e| coarsest(e.child)).sum(),
+            false => node.entries.iter().map(|e| coarse[e.child as usize]).sum(),
+        };
+    }
+    tree.nodes
+        .iter()
+        .enumerate()
+        .map(|(id, node)| {
+            let children: u64 = node
+                .entries
+                .iter()
+                .map(|e| match node.is_leaf() {
+                    true => finest(&mesh_lods[scene.objects[e.child as usize].mesh as usize]),
+                    false => finest(&node_lods[e.child as usize]),
+                })
+                .sum();
+            NodeShape {
+                level: node.level,
+                leaves: leaves[id],
+                objects: objects[id],
+                face_ratio: (finest(&node_lods[id]) as f64 / children.max(1) as f64) as f32,
+                coarsest_object_faces: coarse[id],
+            }
+        })
+        .collect()
 }
 
 /// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.

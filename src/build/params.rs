@@ -39,6 +39,10 @@ pub mod limits {
 pub struct BuildParams {
     /// Bytes per page of the tree file and of the V-page layouts.
     pub page_size: u32,
+    /// Most entries per tree node (M); `None`: as many as a page holds. A smaller M makes a
+    /// deeper tree whose nodes cover less of the scene, so the DoV threshold can stop early.
+    #[serde(default)]
+    pub fanout: Option<u32>,
     pub tree: TreeAlgorithm,
     pub lod: LodParams,
     /// `None` builds tree and LODs only.
@@ -49,6 +53,7 @@ impl Default for BuildParams {
     fn default() -> Self {
         Self {
             page_size: 4096,
+            fanout: None,
             tree: TreeAlgorithm::Str,
             lod: LodParams::default(),
             visibility: Some(VisibilityParams::default()),
@@ -104,6 +109,12 @@ impl VisibilityParams {
 }
 
 impl BuildParams {
+    /// Most entries per node: `fanout`, or what a page holds.
+    pub fn max_entries(&self) -> usize {
+        let page = crate::db::tree_page::fanout(self.page_size);
+        self.fanout.map_or(page, |m| (m as usize).min(page))
+    }
+
     /// Checks every parameter against its bounds, and the grid (if any) against the cell and
     /// sample-point limits. Costs nothing; [`crate::build()`] calls it before any work.
     pub fn check(&self, grid: Option<&ViewGrid>) -> Result<()> {
@@ -113,6 +124,14 @@ impl BuildParams {
             return Err(Error::bad_param(
                 "page_size",
                 format!("{} bytes is outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}", self.page_size),
+            ));
+        }
+        if let Some(m) = self.fanout
+            && !(2..=fanout as u32).contains(&m)
+        {
+            return Err(Error::bad_param(
+                "fanout",
+                format!("{m} entries is outside 2..={fanout}, what a {}-byte page holds", self.page_size),
             ));
         }
         let lod = &self.lod;

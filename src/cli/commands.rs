@@ -71,9 +71,12 @@ pub struct BuildArgs {
     /// Cell edge length along x and z (one height layer).
     #[arg(long, allow_negative_numbers = true)]
     cell_size: Option<f32>,
-    /// Bytes per tree node page; the fan-out follows from it.
+    /// Bytes per tree node page and V-page layout page.
     #[arg(long, default_value_t = 4096)]
     page_size: u32,
+    /// Most entries per tree node (default: what a page holds, 126 at 4 KiB).
+    #[arg(long)]
+    fanout: Option<u32>,
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
     #[arg(long, default_value = "str")]
     tree: TreeAlgorithm,
@@ -220,8 +223,13 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
 }
 
 pub fn build(a: BuildArgs) -> Result<()> {
-    let params =
-        BuildParams { page_size: a.page_size, tree: a.tree, visibility: a.visibility.params()?, ..Default::default() };
+    let params = BuildParams {
+        page_size: a.page_size,
+        fanout: a.fanout,
+        tree: a.tree,
+        visibility: a.visibility.params()?,
+        ..Default::default()
+    };
     // Every argument that does not need the scene is checked before the scene is read.
     params.check(None)?;
     let (mut scene, warnings) = Scene::load(&a.scene)?;

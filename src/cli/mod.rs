@@ -4,6 +4,7 @@
 
 mod args;
 mod commands;
+mod query;
 
 use std::process::ExitCode;
 
@@ -32,6 +33,10 @@ enum Command {
     Info(commands::InfoArgs),
     /// Point DoV of every object of a scene seen from one point.
     Dov(commands::DovArgs),
+    /// What is visible from a point, at which detail, and what finding it cost.
+    Query(query::QueryCmd),
+    /// Walk a path of viewpoints through a database: cell flips, delta loads, cache hits.
+    Walk(query::WalkCmd),
 }
 
 pub fn main() -> ExitCode {
@@ -54,6 +59,8 @@ pub fn main() -> ExitCode {
         Command::Merge(a) => commands::merge(a),
         Command::Info(a) => commands::info(a),
         Command::Dov(a) => commands::dov(a),
+        Command::Query(a) => query::query(a),
+        Command::Walk(a) => query::walk(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -94,6 +101,7 @@ fn user_message(e: &Error) -> String {
 fn flag_of(param: &str) -> &str {
     match param {
         "page_size" => "--page-size",
+        "fanout" => "--fanout",
         "resolution" => "--resolution",
         "interior_samples" => "--samples",
         "layouts" => "--layouts",
@@ -109,6 +117,11 @@ fn flag_of(param: &str) -> &str {
         "blocks" => "--blocks",
         "scale" => "--scale",
         "shards" => "SHARD_DB",
+        "at" => "--at",
+        "eta" => "--eta",
+        "tau" => "--tau",
+        "camera" => "--look",
+        "session" => "--cache-pages",
         "scene" => "SCENE",
         other => other,
     }

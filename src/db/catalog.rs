@@ -27,6 +27,24 @@ pub struct ObjectRecord {
     pub transform: [f32; 16],
 }
 
+/// What the query engine needs to know of a node before reading its page: the inputs of the
+/// thesis's stop rule (eq. 5.3–5.4), view-invariant, so kept in memory.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NodeShape {
+    /// 0 for leaves.
+    pub level: u32,
+    /// Leaf nodes under the node (a leaf counts itself): m of eq. 5.3.
+    pub leaves: u32,
+    /// Objects under the node.
+    pub objects: u32,
+    /// Faces of the node's finest internal LOD over the faces of its children's finest LODs
+    /// (full-detail objects for a leaf): s of eq. 5.3.
+    pub face_ratio: f32,
+    /// Faces of the coarsest leaf LODs of all objects under the node: with `objects`, what a
+    /// barely visible object under it costs on average.
+    pub coarsest_object_faces: u64,
+}
+
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Catalog {
     pub objects: Vec<ObjectRecord>,
@@ -35,6 +53,8 @@ pub struct Catalog {
     pub mesh_lods: Vec<Vec<LodRef>>,
     /// Per node id, finest first.
     pub node_lods: Vec<Vec<LodRef>>,
+    /// Per node id.
+    pub node_shapes: Vec<NodeShape>,
 }
 
 impl Catalog {
@@ -46,8 +66,17 @@ impl Catalog {
     /// Checks internal consistency, and that every LOD reference lies inside a geometry file of
     /// `geometry_len` bytes; returns the first violation.
     pub fn check(&self, nodes: usize, geometry_len: u64) -> Result<(), String> {
-        if self.node_lods.len() != nodes {
-            return Err(format!("{} node LOD chains for {nodes} nodes", self.node_lods.len()));
+        if self.node_lods.len() != nodes || self.node_shapes.len() != nodes {
+            return Err(format!(
+                "{} node LOD chains and {} node shapes for {nodes} nodes",
+                self.node_lods.len(),
+                self.node_shapes.len()
+            ));
+        }
+        if let Some(s) = self.node_shapes.iter().find(|s| {
+            s.leaves == 0 || s.objects == 0 || s.objects as usize > self.objects.len() || !(s.face_ratio >= 0.0)
+        }) {
+            return Err(format!("a node shape that cannot be: {s:?}"));
         }
         if self.mesh_lods.len() != self.mesh_names.len() {
             return Err("mesh LOD chains and mesh names differ in number".into());

@@ -24,7 +24,8 @@ use hdov_storage::{BlobFile, LayoutKind, LayoutReader, PageFile, ReadMode};
 pub use manifest::{Counts, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
 use tree_page::NodePage;
 
-pub const FORMAT_VERSION: u32 = 1;
+/// 2: the catalog holds node shapes (the stop rule's inputs).
+pub const FORMAT_VERSION: u32 = 2;
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const TREE_FILE: &str = "tree.pages";
 pub const GEOMETRY_FILE: &str = "geometry.blob";
@@ -148,6 +149,12 @@ impl Database {
             ));
         }
         Ok(reader)
+    }
+
+    /// The encoded bytes of one LOD level in `geometry.blob` (checksum verified): what a
+    /// walkthrough loads and keeps resident. Decode with [`Database::lod_mesh`].
+    pub fn lod_bytes(&self, lod: &LodRef) -> Result<&[u8]> {
+        Ok(self.geometry.get(lod.blob())?)
     }
 
     /// Loads one LOD mesh from `geometry.blob` (checksum verified).

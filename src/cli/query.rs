@@ -1,0 +1,281 @@
+//! `hdov query` and `hdov walk`: ask a database what is visible, from a point or along a path.
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+
+use super::args::parse_vec3;
+use hdov::error::{Error, Result};
+use hdov::query::{Camera, Mode};
+use hdov::{Answer, Database, QueryParams, SessionParams, Step};
+use hdov_storage::{LayoutKind, PolicyKind};
+
+/// What both commands ask of each query.
+#[derive(Args)]
+pub struct QueryArgs {
+    /// DoV threshold η (threshold mode): subtrees seen with DoV ≤ η come back as one coarse LOD.
+    #[arg(long, default_value_t = 1e-3)]
+    eta: f64,
+    /// threshold, naive, budget, vmsse or frustum.
+    #[arg(long, default_value = "threshold")]
+    mode: Mode,
+    /// V-page layout to read (default: indexed-vertical).
+    #[arg(long)]
+    layout: Option<LayoutKind>,
+    /// Budget mode: faces to return at most.
+    #[arg(long, default_value_t = 100_000)]
+    budget: u64,
+    /// Vmsse mode: screen-space error bound in pixels.
+    #[arg(long, default_value_t = 1.0)]
+    tau: f64,
+    /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    look: Option<Vec3>,
+    /// Vertical field of view in degrees (with --look; vmsse without --look assumes 60).
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Image height in pixels of vmsse's screen errors (with --look; else 1080).
+    #[arg(long, default_value_t = 1080)]
+    image_height: u32,
+}
+
+impl QueryArgs {
+    fn params(&self) -> QueryParams {
+        let camera = Camera { fov_y_deg: self.fov, image_height: self.image_height, ..Camera::default() };
+        QueryParams {
+            mode: self.mode,
+            eta: self.eta,
+            budget: self.budget,
+            tau: self.tau,
+            camera: self.look.map(|look| Camera { look, ..camera }),
+            layout: self.layout,
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct QueryCmd {
+    db: PathBuf,
+    /// The viewpoint X,Y,Z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    at: Vec3,
+    #[command(flatten)]
+    query: QueryArgs,
+    /// Items listed in the summary (all of them with --json).
+    #[arg(long, default_value_t = 20)]
+    list: usize,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn query(a: QueryCmd) -> Result<()> {
+    let db = Database::open(&a.db)?;
+    let answer = db.query(a.at, &a.query.params())?;
+    for w in &answer.warnings {
+        eprintln!("warning: {w}");
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&answer).expect("serialisable"));
+        return Ok(());
+    }
+    print_answer(&answer, a.list);
+    Ok(())
+}
+
+fn print_answer(a: &Answer, list: usize) {
+    let s = &a.stats;
+    let nodes = a.items.iter().filter(|i| i.kind == hdov::ItemKind::Node).count();
+    println!(
+        "cell {:?} ({}), {} mode, η = {}, {} layout: {} items ({} internal LODs), {} faces",
+        a.cell,
+        a.cell_id,
+        a.mode,
+        a.eta,
+        a.layout,
+        a.items.len(),
+        nodes,
+        s.faces
+    );
+    println!(
+        "  pages read {} (tree {}, V-index {}, V-pages {}), nodes visited {}, {} µs{}",
+        s.pages_read,
+        s.tree_pages,
+        s.vindex_pages,
+        s.vpage_pages,
+        s.nodes_visited,
+        s.micros,
+        if s.over_budget { ", over budget" } else { "" }
+    );
+    let mut items: Vec<_> = a.items.iter().collect();
+    items.sort_by(|x, y| y.dov.total_cmp(&x.dov));
+    for i in items.iter().take(list) {
+        println!(
+            "  {:>10.6}  {:<6} #{:<6} LOD {:<2} {:>7} faces  {}",
+            i.dov,
+            format!("{:?}", i.kind).to_lowercase(),
+            i.id,
+            i.lod,
+            i.faces,
+            i.name
+        );
+    }
+    if items.len() > list {
+        println!("  … {} more (--list N, or --json)", items.len() - list);
+    }
+}
+
+#[derive(Args)]
+pub struct WalkCmd {
+    db: PathBuf,
+    /// The path: a CSV file of viewpoints, `x,y,z` or `x,y,z,dx,dy,dz` (a view direction) per line.
+    #[arg(long)]
+    path: PathBuf,
+    #[command(flatten)]
+    query: QueryArgs,
+    /// Tree-page and V-page cache: none, lru, dov or dov-time.
+    #[arg(long, default_value = "lru")]
+    cache: PolicyKind,
+    /// Cache capacity in pages.
+    #[arg(long, default_value_t = 256)]
+    cache_pages: usize,
+    /// Cache capacity in bytes (unbounded if not given).
+    #[arg(long)]
+    cache_bytes: Option<u64>,
+    /// Most bytes of LOD geometry to keep resident (unbounded if not given).
+    #[arg(long)]
+    resident_bytes: Option<u64>,
+    /// Query the cell ahead along the motion, so its pages are cached on arrival.
+    #[arg(long)]
+    prefetch: bool,
+    #[arg(long)]
+    json: bool,
+}
+
+/// A walk's totals.
+#[derive(Serialize)]
+struct WalkSummary {
+    steps: usize,
+    flips: usize,
+    pages_read: u64,
+    hits: u64,
+    misses: u64,
+    prefetch_pages: u64,
+    loaded_bytes: u64,
+    evicted_bytes: u64,
+    max_resident_bytes: u64,
+    mean_faces: f64,
+    micros_mean: f64,
+    micros_p99: u64,
+}
+
+pub fn walk(a: WalkCmd) -> Result<()> {
+    let db = Database::open(&a.db)?;
+    let path = read_path(&a.path)?;
+    let params = SessionParams {
+        query: a.query.params(),
+        cache: a.cache,
+        cache_pages: Some(a.cache_pages),
+        cache_bytes: a.cache_bytes,
+        resident_bytes: a.resident_bytes,
+        prefetch: a.prefetch,
+    };
+    let mut session = db.session(&params)?;
+    let mut steps: Vec<Step> = Vec::with_capacity(path.len());
+    for (line, at, look) in path {
+        let step = session.step(at, look).map_err(|e| match e {
+            Error::BadParam { param, reason } if param == "at" => {
+                Error::bad_file(&a.path, format!("line {line}: {reason}"))
+            }
+            e => e,
+        })?;
+        steps.push(step);
+    }
+    let summary = summarise(&steps);
+    if a.json {
+        let doc = serde_json::json!({"steps": steps, "summary": summary});
+        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
+        return Ok(());
+    }
+    for s in &steps {
+        println!(
+            "step {:>4} cell {:?}{} items {:>5} faces {:>9} pages {:>4} hits {:>4} loaded {:>3} ({:>9} B) evicted {:>3} resident {:>10} B {:>6} µs",
+            s.step,
+            s.cell,
+            if s.flipped { " flip" } else { "     " },
+            s.items,
+            s.faces,
+            s.pages_read,
+            s.hits,
+            s.loaded,
+            s.loaded_bytes,
+            s.evicted,
+            s.resident_bytes,
+            s.micros
+        );
+    }
+    println!(
+        "{} steps, {} flips, {} pages read ({} hits, {} misses, {} prefetched), {} bytes loaded, {} evicted, mean {:.0} faces, {:.0} µs mean, {} µs p99",
+        summary.steps,
+        summary.flips,
+        summary.pages_read,
+        summary.hits,
+        summary.misses,
+        summary.prefetch_pages,
+        summary.loaded_bytes,
+        summary.evicted_bytes,
+        summary.mean_faces,
+        summary.micros_mean,
+        summary.micros_p99
+    );
+    Ok(())
+}
+
+fn summarise(steps: &[Step]) -> WalkSummary {
+    let n = steps.len().max(1) as f64;
+    let mut micros: Vec<u64> = steps.iter().map(|s| s.micros).collect();
+    micros.sort_unstable();
+    let p99 = micros.get(((micros.len() as f64 * 0.99).ceil() as usize).saturating_sub(1)).copied().unwrap_or(0);
+    WalkSummary {
+        steps: steps.len(),
+        flips: steps.iter().filter(|s| s.flipped).count(),
+        pages_read: steps.iter().map(|s| s.pages_read).sum(),
+        hits: steps.iter().map(|s| s.hits).sum(),
+        misses: steps.iter().map(|s| s.misses).sum(),
+        prefetch_pages: steps.iter().map(|s| s.prefetch_pages).sum(),
+        loaded_bytes: steps.iter().map(|s| s.loaded_bytes).sum(),
+        evicted_bytes: steps.iter().map(|s| s.evicted_bytes).sum(),
+        max_resident_bytes: steps.iter().map(|s| s.resident_bytes).max().unwrap_or(0),
+        mean_faces: steps.iter().map(|s| s.faces as f64).sum::<f64>() / n,
+        micros_mean: micros.iter().sum::<u64>() as f64 / n,
+        micros_p99: p99,
+    }
+}
+
+/// A path file: `(line number, viewpoint, view direction)` per point.
+fn read_path(path: &Path) -> Result<Vec<(usize, Vec3, Option<Vec3>)>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let bad = |r: String| Error::bad_file(path, format!("line {}: {r}", i + 1));
+        let v: Vec<f32> = line
+            .split(',')
+            .map(|x| x.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or_else(|| bad(format!("'{line}' is not finite numbers x,y,z[,dx,dy,dz]")))?;
+        match v.len() {
+            3 => out.push((i + 1, Vec3::new(v[0], v[1], v[2]), None)),
+            6 => out.push((i + 1, Vec3::new(v[0], v[1], v[2]), Some(Vec3::new(v[3], v[4], v[5])))),
+            n => return Err(bad(format!("{n} numbers; expected x,y,z or x,y,z,dx,dy,dz"))),
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::bad_file(path, "holds no viewpoints"));
+    }
+    Ok(out)
+}

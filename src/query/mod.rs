@@ -1,0 +1,268 @@
+//! The query engine: what is visible from a point, at which detail, and what it cost to find out.
+//!
+//! - [`Database::query`]: one point query in one of five [`Mode`]s — the HDoV-tree's threshold
+//!   traversal (thesis fig. 5.4), the naive cell → visible-objects list (§5.8.4), a polygon
+//!   budget (§6.1.2), a visibility-modulated screen-space error (seeds 000/001), and plain
+//!   frustum culling;
+//! - [`Session`]: a walkthrough, cell flips, delta loading of LODs and a page cache;
+//! - [`camera`]: the view frustum that every mode culls its answer to when given a camera.
+//!
+//! Every tree page and V-page is read through [`access::Access`], which counts what each query
+//! reads per file.
+
+pub(crate) mod access;
+pub mod camera;
+pub mod session;
+mod traverse;
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::db::Database;
+use crate::db::catalog::LodRef;
+use crate::error::{Error, Result};
+use crate::geom::Aabb;
+pub use camera::Camera;
+use hdov_storage::LayoutKind;
+pub use session::{Session, SessionParams, Step};
+
+/// DoV above which an object is drawn at full detail (thesis eq. 5.6): an object whose box does
+/// not hold the viewpoint covers at most half the sphere.
+pub const MAX_DOV: f64 = 0.5;
+
+/// How a query chooses what to return.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// The HDoV-tree traversal: hidden subtrees skipped, subtrees with DoV ≤ η returned as one
+    /// internal LOD where that draws fewer faces than their visible objects (eq. 5.3–5.6).
+    #[default]
+    Threshold,
+    /// Every object visible from the cell at its leaf LOD, from the leaves' V-pages alone.
+    Naive,
+    /// Refine by descending DoV within a budget of faces (thesis fig. 6.2).
+    Budget,
+    /// Stop refining where the visibility-weighted screen-space error is at most τ pixels.
+    Vmsse,
+    /// Every object in the view frustum at full detail, no visibility (the CONV baseline).
+    Frustum,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 5] = [Mode::Threshold, Mode::Naive, Mode::Budget, Mode::Vmsse, Mode::Frustum];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Threshold => "threshold",
+            Mode::Naive => "naive",
+            Mode::Budget => "budget",
+            Mode::Vmsse => "vmsse",
+            Mode::Frustum => "frustum",
+        }
+    }
+}
+
+impl fmt::Display for Mode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Mode, String> {
+        Mode::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown mode '{s}' (threshold, naive, budget, vmsse, frustum)"))
+    }
+}
+
+/// What a query asks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QueryParams {
+    pub mode: Mode,
+    /// The DoV threshold η of threshold mode, in [0, 1]; 0 returns the naive answer.
+    pub eta: f64,
+    /// Faces the budget mode may return.
+    pub budget: u64,
+    /// Screen-space error bound of vmsse mode, in pixels of the camera's image.
+    pub tau: f64,
+    /// With a camera, the answer is culled to its view frustum (what is drawn this frame);
+    /// without, it is everything the cell may see in every direction. Vmsse mode takes its
+    /// image size and field of view from it (or from [`Camera::default`]).
+    pub camera: Option<Camera>,
+    /// The V-page layout to read (default: indexed-vertical if the database has it).
+    pub layout: Option<LayoutKind>,
+}
+
+impl Default for QueryParams {
+    fn default() -> Self {
+        Self { mode: Mode::Threshold, eta: 1e-3, budget: 100_000, tau: 1.0, camera: None, layout: None }
+    }
+}
+
+/// An object or a tree node (drawn as its internal LOD).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ItemKind {
+    Object,
+    Node,
+}
+
+/// One thing to draw.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Item {
+    pub kind: ItemKind,
+    /// Object index or node id.
+    pub id: u32,
+    /// The object's name, or `node N`.
+    pub name: String,
+    /// LOD level, 0 = finest.
+    pub lod: u32,
+    pub faces: u32,
+    /// DoV from the query's cell (0 in frustum mode, which measures none).
+    pub dov: f32,
+    /// World-space bounds.
+    pub mbr: Aabb,
+    /// Where the LOD's geometry lives in `geometry.blob` ([`Database::lod_mesh`] loads it).
+    pub lod_ref: LodRef,
+}
+
+impl Item {
+    /// The identity of the geometry this item draws: (kind, id, level).
+    pub fn key(&self) -> (ItemKind, u32, u32) {
+        (self.kind, self.id, self.lod)
+    }
+}
+
+/// Pages a query read, per file, and its other costs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QueryStats {
+    /// Pages read from `tree.pages`.
+    pub tree_pages: u64,
+    /// Pages read from the layout's index file (vertical layouts; 0 for horizontal).
+    pub vindex_pages: u64,
+    /// Pages read from the layout's V-page file.
+    pub vpage_pages: u64,
+    /// All light-weight pages: tree + index + V-pages.
+    pub pages_read: u64,
+    /// Tree nodes whose page the query read.
+    pub nodes_visited: u64,
+    /// Faces of all items.
+    pub faces: u64,
+    /// Heavy-weight I/O: bytes of geometry loaded (a point query loads none; a session does).
+    pub geometry_bytes: u64,
+    /// Budget mode: the budget could not be kept (the coarsest LOD alone exceeds it).
+    pub over_budget: bool,
+    pub micros: u64,
+}
+
+/// What a query returned.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Answer {
+    pub at: [f32; 3],
+    /// The cell `[i, j, k]` holding the viewpoint, and its id.
+    pub cell: [u32; 3],
+    pub cell_id: u32,
+    pub mode: Mode,
+    pub eta: f64,
+    pub layout: String,
+    pub items: Vec<Item>,
+    pub stats: QueryStats,
+    /// E.g. an η below the database's resolution floor.
+    pub warnings: Vec<String>,
+}
+
+impl Database {
+    /// Answers a point query from `at`.
+    ///
+    /// Errors (one line, naming the parameter): `at` not finite or outside the grid, η outside
+    /// [0, 1], a bad camera, a layout the database lacks, a database without visibility. An η
+    /// below the resolution floor (one centre texel, DESIGN §3) is answered with a warning.
+    /// Costs the pages it reads (counted in [`Answer::stats`]): a cell flip, then one tree page
+    /// and one V-page per node the traversal enters.
+    pub fn query(&self, at: Vec3, params: &QueryParams) -> Result<Answer> {
+        let mut access = access::Access::open(self, params.layout)?;
+        self.query_with(&mut access, at, params)
+    }
+
+    /// A query through an existing reader (a session's, with its cache).
+    pub(crate) fn query_with(&self, access: &mut access::Access, at: Vec3, params: &QueryParams) -> Result<Answer> {
+        let start = Instant::now();
+        let warnings = self.check_query(params)?;
+        let (cell, cell_id) = self.locate(at)?;
+        access.reset_io();
+        access.flip(cell_id)?;
+        let mut out = traverse::run(self, access, at, params)?;
+        if let Some(cam) = &params.camera {
+            let frustum = cam.frustum(at);
+            out.items.retain(|i| frustum.meets(&i.mbr));
+        }
+        let io = access.io();
+        let stats = QueryStats {
+            tree_pages: io.tree,
+            vindex_pages: io.vindex,
+            vpage_pages: io.vpages,
+            pages_read: io.tree + io.vindex + io.vpages,
+            nodes_visited: out.nodes_visited,
+            faces: out.items.iter().map(|i| u64::from(i.faces)).sum(),
+            geometry_bytes: 0,
+            over_budget: out.over_budget,
+            micros: start.elapsed().as_micros() as u64,
+        };
+        Ok(Answer {
+            at: at.to_array(),
+            cell,
+            cell_id,
+            mode: params.mode,
+            eta: params.eta,
+            layout: access.layout_kind().to_string(),
+            items: out.items,
+            stats,
+            warnings,
+        })
+    }
+
+    /// The cell holding `at` (points on an inner cell border belong to the upper cell).
+    pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
+        let grid =
+            self.grid().ok_or_else(|| Error::bad_param("at", format!("{} holds no grid", self.dir().display())))?;
+        if !at.is_finite() {
+            return Err(Error::bad_param("at", format!("{:?} is not a finite point", at.to_array())));
+        }
+        let cell = grid.cell_of(at).ok_or_else(|| {
+            Error::bad_param("at", format!("{:?} lies outside the grid {:?}", at.to_array(), grid.region.to_array()))
+        })?;
+        Ok((cell, grid.cell_id(cell) as u32))
+    }
+
+    /// Checks the query's parameters; returns its warnings.
+    fn check_query(&self, p: &QueryParams) -> Result<Vec<String>> {
+        let mut warnings = Vec::new();
+        if !(0.0..=1.0).contains(&p.eta) {
+            return Err(Error::bad_param("eta", format!("{} is not in [0, 1]", p.eta)));
+        }
+        if !(p.tau.is_finite() && p.tau > 0.0) {
+            return Err(Error::bad_param("tau", format!("{} pixels must be finite and > 0", p.tau)));
+        }
+        if let Some(cam) = &p.camera {
+            cam.check().map_err(|r| Error::bad_param("camera", r))?;
+        }
+        if let Some(r) = self.manifest().build.visibility.as_ref().map(|v| v.resolution) {
+            // One face-centre texel's share of the sphere (CubeMap::texel_floor, without the map).
+            let floor = (2.0 / f64::from(r)).powi(2) / (4.0 * std::f64::consts::PI);
+            if p.mode == Mode::Threshold && p.eta > 0.0 && p.eta < floor {
+                warnings.push(format!(
+                    "eta {} is below the resolution floor {floor:.2e} of R = {r}: it acts as 0 (DoVs smaller than one texel are noise)",
+                    p.eta
+                ));
+            }
+        }
+        Ok(warnings)
+    }
+}

@@ -1,0 +1,246 @@
+//! Walkthroughs (thesis §5.8.5): a session follows a path of viewpoints. While the viewpoint
+//! stays in a cell nothing is read again; on leaving it the session flips to the new cell's
+//! V-data and asks the tree again through its page cache. *Delta loading*: a LOD already
+//! resident is not loaded again (instances share their base mesh's records, so one load serves
+//! them all); LODs the new cell no longer needs are evicted, oldest first, while resident
+//! geometry is over its byte budget.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use super::access::Access;
+use super::{Answer, Item, QueryParams};
+use crate::db::Database;
+use crate::error::{Error, Result};
+use hdov_storage::{CacheLimits, PolicyKind};
+
+/// Steps ahead along the current motion that prefetch looks (one step is one path point).
+pub const PREFETCH_STEPS: f32 = 3.0;
+
+/// How a session runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SessionParams {
+    /// The query each cell flip runs (its camera's look is replaced per step when a step
+    /// gives one).
+    pub query: QueryParams,
+    /// The tree-page and V-page cache's policy.
+    pub cache: PolicyKind,
+    /// Cache capacity in pages and in bytes (`None`: unbounded).
+    pub cache_pages: Option<usize>,
+    pub cache_bytes: Option<u64>,
+    /// Most bytes of LOD geometry kept resident (`None`: unbounded).
+    pub resident_bytes: Option<u64>,
+    /// Query the cell [`PREFETCH_STEPS`] ahead along the motion, warming the cache.
+    pub prefetch: bool,
+}
+
+impl Default for SessionParams {
+    fn default() -> Self {
+        Self {
+            query: QueryParams::default(),
+            cache: PolicyKind::Lru,
+            cache_pages: Some(256),
+            cache_bytes: None,
+            resident_bytes: None,
+            prefetch: false,
+        }
+    }
+}
+
+/// What one step of a walk did and cost.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Step {
+    pub step: u64,
+    pub at: [f32; 3],
+    pub cell: [u32; 3],
+    /// The viewpoint entered another cell, and the tree was asked again.
+    pub flipped: bool,
+    /// LOD records loaded, and their bytes (heavy-weight I/O).
+    pub loaded: u64,
+    pub loaded_bytes: u64,
+    /// LOD records evicted, and their bytes.
+    pub evicted: u64,
+    pub evicted_bytes: u64,
+    /// Geometry resident after the step.
+    pub resident: u64,
+    pub resident_bytes: u64,
+    /// Light-weight pages read (tree, V-index, V-pages) by this step's query.
+    pub pages_read: u64,
+    /// Page requests the cache served, and those it did not.
+    pub hits: u64,
+    pub misses: u64,
+    /// Pages prefetch read for the cell ahead.
+    pub prefetch_pages: u64,
+    /// Items and faces drawn this step (culled to the step's view when it has a look).
+    pub items: u64,
+    pub faces: u64,
+    /// The cell's answer needs more geometry than the resident budget holds.
+    pub over_budget: bool,
+    pub micros: u64,
+}
+
+/// A resident LOD record.
+struct Resident {
+    bytes: Box<[u8]>,
+    last_used: u64,
+}
+
+/// A walkthrough over one database. See the module documentation.
+pub struct Session<'db> {
+    db: &'db Database,
+    params: SessionParams,
+    access: Access<'db>,
+    /// The current cell's answer, unculled: what stays resident while the viewer is in it.
+    answer: Option<Answer>,
+    last_at: Option<Vec3>,
+    /// By LOD record offset in `geometry.blob`.
+    resident: HashMap<u64, Resident>,
+    resident_bytes: u64,
+    steps: u64,
+}
+
+impl Database {
+    /// Starts a walkthrough session. Checks the parameters; reads nothing yet.
+    pub fn session(&self, params: &SessionParams) -> Result<Session<'_>> {
+        if params.query.camera.is_some_and(|c| c.check().is_err()) || params.cache_pages == Some(0) {
+            return Err(Error::bad_param("session", "a bad camera or a zero-page cache"));
+        }
+        let _limits = CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
+        Ok(Session {
+            db: self,
+            params: *params,
+            access: Access::open(self, params.query.layout)?,
+            answer: None,
+            last_at: None,
+            resident: HashMap::new(),
+            resident_bytes: 0,
+            steps: 0,
+        })
+    }
+}
+
+impl<'db> Session<'db> {
+    /// Moves the viewer to `at`, looking along `look` (or the session camera's direction).
+    /// Errors as [`Database::query`] does (a viewpoint outside the grid, ...), and leaves the
+    /// session as it was.
+    pub fn step(&mut self, at: Vec3, look: Option<Vec3>) -> Result<Step> {
+        let start = Instant::now();
+        let (cell, cell_id) = self.db.locate(at)?;
+        let flipped = self.answer.as_ref().is_none_or(|a| a.cell_id != cell_id);
+        let mut step = Step { step: self.steps, at: at.to_array(), cell, flipped, ..Default::default() };
+        if flipped {
+            // The cell's whole answer (no camera): what a walkthrough keeps resident.
+            let query = QueryParams { camera: None, ..self.params.query };
+            let answer = self.db.query_with(&mut self.access, at, &query)?;
+            step.pages_read = answer.stats.pages_read;
+            self.answer = Some(answer);
+            self.delta_load(&mut step)?;
+        }
+        if self.params.prefetch {
+            step.prefetch_pages = self.prefetch(at, cell_id)?;
+        }
+        let items = self.frame_items(at, look);
+        step.items = items.len() as u64;
+        step.faces = items.iter().map(|i| u64::from(i.faces)).sum();
+        step.resident = self.resident.len() as u64;
+        step.resident_bytes = self.resident_bytes;
+        step.micros = start.elapsed().as_micros() as u64;
+        self.last_at = Some(at);
+        self.steps += 1;
+        Ok(step)
+    }
+
+    /// The items to draw from `at` looking along `look`: the cell's answer culled to the view.
+    pub fn frame_items(&self, at: Vec3, look: Option<Vec3>) -> Vec<&Item> {
+        let Some(answer) = &self.answer else { return Vec::new() };
+        let camera = match (look, self.params.query.camera) {
+            (Some(look), cam) => Some(super::Camera { look, ..cam.unwrap_or_default() }),
+            (None, cam) => cam,
+        };
+        match camera.filter(|c| c.check().is_ok()) {
+            Some(cam) => {
+                let f = cam.frustum(at);
+                answer.items.iter().filter(|i| f.meets(&i.mbr)).collect()
+            }
+            None => answer.items.iter().collect(),
+        }
+    }
+
+    /// The current cell's answer.
+    pub fn answer(&self) -> Option<&Answer> {
+        self.answer.as_ref()
+    }
+
+    /// Bytes of LOD geometry resident now.
+    pub fn resident_bytes(&self) -> u64 {
+        self.resident_bytes
+    }
+
+    /// The LOD records resident now, by offset in `geometry.blob`, with their sizes.
+    pub fn resident(&self) -> impl Iterator<Item = (u64, usize)> + '_ {
+        self.resident.iter().map(|(&k, r)| (k, r.bytes.len()))
+    }
+
+    /// Loads what the new cell's answer needs and is not resident; evicts what it does not
+    /// need, least recently used first, while the budget would be exceeded.
+    fn delta_load(&mut self, step: &mut Step) -> Result<()> {
+        let answer = self.answer.as_ref().expect("a flip sets the answer");
+        let mut needed: Vec<(u64, crate::db::catalog::LodRef)> =
+            answer.items.iter().map(|i| (i.lod_ref.offset, i.lod_ref)).collect();
+        needed.sort_unstable_by_key(|n| n.0);
+        needed.dedup_by_key(|n| n.0);
+        let is_needed = |k: &u64| needed.binary_search_by_key(k, |n| n.0).is_ok();
+        for (k, _) in &needed {
+            if let Some(r) = self.resident.get_mut(k) {
+                r.last_used = self.steps;
+            }
+        }
+        let incoming: u64 =
+            needed.iter().filter(|(k, _)| !self.resident.contains_key(k)).map(|(_, l)| u64::from(l.len)).sum();
+        if let Some(budget) = self.params.resident_bytes {
+            let mut spare: Vec<(u64, u64)> =
+                self.resident.iter().filter(|(k, _)| !is_needed(k)).map(|(&k, r)| (r.last_used, k)).collect();
+            spare.sort_unstable();
+            for (_, k) in spare {
+                if self.resident_bytes + incoming <= budget {
+                    break;
+                }
+                let r = self.resident.remove(&k).expect("listed as resident");
+                self.resident_bytes -= r.bytes.len() as u64;
+                step.evicted += 1;
+                step.evicted_bytes += r.bytes.len() as u64;
+            }
+            step.over_budget = self.resident_bytes + incoming > budget;
+        }
+        for (k, lod) in needed {
+            if self.resident.contains_key(&k) {
+                continue;
+            }
+            let bytes: Box<[u8]> = self.db.lod_bytes(&lod)?.into();
+            step.loaded += 1;
+            step.loaded_bytes += bytes.len() as u64;
+            self.resident_bytes += bytes.len() as u64;
+            self.resident.insert(k, Resident { bytes, last_used: self.steps });
+        }
+        Ok(())
+    }
+
+    /// Runs the query of the cell [`PREFETCH_STEPS`] ahead along the motion (if that is another
+    /// cell inside the grid), so its pages are in the cache on arrival; returns pages read.
+    fn prefetch(&mut self, at: Vec3, cell_id: u32) -> Result<u64> {
+        let Some(last) = self.last_at else { return Ok(0) };
+        let ahead = at + (at - last) * PREFETCH_STEPS;
+        let Ok((_, ahead_id)) = self.db.locate(ahead) else { return Ok(0) };
+        if ahead_id == cell_id {
+            return Ok(0);
+        }
+        let query = QueryParams { camera: None, ..self.params.query };
+        let pages = self.db.query_with(&mut self.access, ahead, &query)?.stats.pages_read;
+        // Back to the current cell (free where the layout keeps no per-cell state).
+        self.access.flip(cell_id)?;
+        Ok(pages)
+    }
+}
