@@ -118,13 +118,21 @@ impl Manifest {
         let c = &self.counts;
         self.build.check(self.grid.as_ref()).map_err(|e| format!("build parameters: {e}"))?;
         if c.objects == 0 || c.nodes == 0 || c.base_meshes == 0 {
-            return Err(format!("{} objects, {} base meshes, {} nodes: none may be 0", c.objects, c.base_meshes, c.nodes));
+            return Err(format!(
+                "{} objects, {} base meshes, {} nodes: none may be 0",
+                c.objects, c.base_meshes, c.nodes
+            ));
         }
         if c.objects > u64::from(u32::MAX) || c.nodes > u64::from(u32::MAX) {
             return Err("more objects or nodes than 32-bit ids can name".into());
         }
         if self.tree.nodes as u64 != c.nodes {
             return Err(format!("tree has {} nodes, counts say {}", self.tree.nodes, c.nodes));
+        }
+        // The grid is checked with the build parameters only when they hold visibility: a
+        // grid of a database without must be in bounds too before its cells are counted.
+        if let Some(g) = &self.grid {
+            crate::build::params::check_grid(g, 0).map_err(|e| e.to_string())?;
         }
         match self.grid {
             Some(g) if g.cell_count() as u64 != c.cells => {
