@@ -143,7 +143,12 @@ pub fn build(
         hdov: Manifest::MAGIC.into(),
         format_version: FORMAT_VERSION,
         created_by: format!("hdov {}", env!("CARGO_PKG_VERSION")),
-        build: params.clone(),
+        // Visibility parameters are recorded with the visibility they built, or not at all (a
+        // scene without a grid gets tree and LODs only): a reader refuses one without the other.
+        build: BuildParams {
+            visibility: if visibility.is_some() { params.visibility.clone() } else { None },
+            ..params.clone()
+        },
         counts: Counts {
             objects: scene.objects.len() as u64,
             base_meshes: scene.meshes.len() as u64,
