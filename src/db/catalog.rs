@@ -1,6 +1,7 @@
 //! The catalog (`catalog.blob`, storage kind `CATL`, one bincode record): objects and where each
 //! LOD level lives in `geometry.blob`. Small enough to keep in memory while a database is open.
 
+use hdov_storage::blob::{BLOB_HEADER_LEN, RECORD_HEADER_LEN};
 use serde::{Deserialize, Serialize};
 
 /// Where one LOD level lives and what it costs to draw.
@@ -63,8 +64,8 @@ impl Catalog {
         &self.mesh_lods[self.objects[object as usize].mesh as usize]
     }
 
-    /// Checks internal consistency, and that every LOD reference lies inside a geometry file of
-    /// `geometry_len` bytes; returns the first violation.
+    /// Checks internal consistency, and that the LOD references lie inside a geometry file of
+    /// `geometry_len` bytes and tile its records; returns the first violation.
     pub fn check(&self, nodes: usize, geometry_len: u64) -> Result<(), String> {
         if self.node_lods.len() != nodes || self.node_shapes.len() != nodes {
             return Err(format!(
@@ -102,6 +103,23 @@ impl Catalog {
             if chain.windows(2).any(|w| w[1].faces > w[0].faces) || chain[0].faces == 0 {
                 return Err("a LOD chain that is not finest first or has an empty level".into());
             }
+        }
+        // The records of geometry.blob are the LOD levels, back to back: sorted by offset, the
+        // references (a record may be referred to more than once) tile the data exactly. A
+        // damaged offset or length is refused here, naming the catalog, not on a later read.
+        let mut refs: Vec<(u64, u32)> =
+            self.mesh_lods.iter().chain(&self.node_lods).flatten().map(|l| (l.offset, l.len)).collect();
+        refs.sort_unstable();
+        refs.dedup();
+        let mut end = BLOB_HEADER_LEN as u64;
+        for (offset, len) in refs {
+            if offset != end {
+                return Err(format!("LOD at byte {offset} (+{len}) is not where a geometry.blob record starts"));
+            }
+            end = offset.saturating_add((RECORD_HEADER_LEN as u64) + u64::from(len));
+        }
+        if end != geometry_len {
+            return Err(format!("LOD records end at byte {end}, geometry.blob at byte {geometry_len}"));
         }
         Ok(())
     }

@@ -129,6 +129,11 @@ impl Manifest {
         if self.tree.nodes as u64 != c.nodes {
             return Err(format!("tree has {} nodes, counts say {}", self.tree.nodes, c.nodes));
         }
+        // The grid is checked with the build parameters only when they hold visibility: a
+        // grid of a database without must be in bounds too before its cells are counted.
+        if let Some(g) = &self.grid {
+            crate::build::params::check_grid(g, 0).map_err(|e| e.to_string())?;
+        }
         match self.grid {
             Some(g) if g.cell_count() as u64 != c.cells => {
                 return Err(format!("grid has {} cells, counts say {}", g.cell_count(), c.cells));

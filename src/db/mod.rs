@@ -73,18 +73,21 @@ impl Database {
         if tree.page_count() != nodes {
             return Err(Error::bad_file(
                 dir.join(TREE_FILE),
-                format!("{} node pages, the manifest says {nodes}", tree.page_count()),
+                format!("{} node pages, {MANIFEST_FILE} says {nodes}", tree.page_count()),
             ));
         }
         if tree.page_size() != manifest.build.page_size {
             return Err(Error::bad_file(
                 dir.join(TREE_FILE),
-                format!("pages of {} bytes, the manifest says {}", tree.page_size(), manifest.build.page_size),
+                format!("pages of {} bytes, {MANIFEST_FILE} says {}", tree.page_size(), manifest.build.page_size),
             ));
         }
         let counts = &manifest.counts;
         if catalog.objects.len() as u64 != counts.objects || catalog.mesh_lods.len() as u64 != counts.base_meshes {
-            return Err(Error::bad_file(&catalog_path, "object or base mesh count differs from the manifest"));
+            return Err(Error::bad_file(
+                &catalog_path,
+                format!("object or base mesh count differs from {MANIFEST_FILE}'s"),
+            ));
         }
         catalog.check(nodes as usize, geometry.file_len()).map_err(|r| Error::bad_file(&catalog_path, r))?;
         Ok(Database { dir: dir.to_path_buf(), manifest, catalog, tree, geometry })
@@ -114,10 +117,12 @@ impl Database {
         self.manifest.counts.nodes as u32
     }
 
-    /// Reads and validates one node page (counted as one page read).
+    /// Reads and validates one node page (counted as one page read), its pointers against the
+    /// depth-first numbering too (see [`tree_page::check_position`]).
     pub fn node(&self, id: u32) -> Result<NodePage> {
         let bytes = self.tree.page(id as u64)?;
         tree_page::decode(&bytes, self.node_count(), self.catalog.objects.len() as u32)
+            .and_then(|page| tree_page::check_position(&page, id).map(|()| page))
             .map_err(|r| Error::bad_file(self.dir.join(TREE_FILE), format!("node {id}: {r}")))
     }
 
@@ -142,10 +147,18 @@ impl Database {
             return Err(Error::bad_param("layout", format!("{} holds no {kind} layout", self.dir.display())));
         }
         let reader = LayoutReader::open(&self.dir, kind, mode)?;
+        // Named by its first file (the index, where it has one), which records the counts.
+        let file = self.dir.join(kind.file_names()[0]);
         if reader.node_count() != self.node_count() {
             return Err(Error::bad_file(
-                &self.dir,
+                file,
                 format!("{kind} layout has {} nodes, the tree {}", reader.node_count(), self.node_count()),
+            ));
+        }
+        if u64::from(reader.cell_count()) != self.manifest.counts.cells {
+            return Err(Error::bad_file(
+                file,
+                format!("{kind} layout has {} cells, the grid {}", reader.cell_count(), self.manifest.counts.cells),
             ));
         }
         Ok(reader)

@@ -90,6 +90,24 @@ pub fn decode(bytes: &[u8], nodes: u32, objects: u32) -> Result<NodePage, String
     })
 }
 
+/// Checks that a decoded page fits its place `id` in the depth-first numbering: the root is node
+/// 0, a parent precedes its children and children follow their parent, so no walk down or up
+/// the tree can loop. Returns the reason of the first violation.
+pub fn check_position(page: &NodePage, id: u32) -> Result<(), String> {
+    let n = &page.node;
+    match n.parent {
+        None if id != 0 => return Err("no parent, yet not the root (node 0)".into()),
+        Some(p) if p >= id => return Err(format!("parent {p} does not precede the node")),
+        _ => {}
+    }
+    if n.level > 0
+        && let Some((i, e)) = n.entries.iter().enumerate().find(|(_, e)| e.child <= id)
+    {
+        return Err(format!("entry {i} points to node {}, which does not follow the node", e.child));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,8 +131,12 @@ mod tests {
             subtree_leaves: 5,
         };
         let bytes = encode(&page);
-        assert_eq!(decode(&bytes, 10, 100), Ok(page));
+        assert_eq!(decode(&bytes, 10, 100).as_ref(), Ok(&page));
         assert!(decode(&bytes, 3, 100).unwrap_err().contains("out of range"));
         assert!(decode(&bytes[..40], 10, 100).unwrap_err().contains("do not fit"));
+        // Node 2 under node 0, pointing down to node 3: in place. Elsewhere, a loop.
+        assert_eq!(check_position(&page, 2), Ok(()));
+        assert!(check_position(&page, 0).unwrap_err().contains("parent 0"));
+        assert!(check_position(&page, 3).unwrap_err().contains("entry 0 points to node 3"));
     }
 }
