@@ -171,7 +171,7 @@ fn damaged_files_are_refused_with_a_clear_error() {
             Box::new(|b| {
                 *b = String::from_utf8(b.clone())
                     .unwrap()
-                    .replace("\"format_version\": 1", "\"format_version\": 9")
+                    .replace("\"format_version\": 2", "\"format_version\": 9")
                     .into_bytes()
             }),
             "version 9",

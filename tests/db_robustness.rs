@@ -734,7 +734,7 @@ fn truncated_geometry_is_refused_on_open() {
     let f = fixture();
     let d = damaged(&f, GEOMETRY, |b| b.truncate(b.len() - 1));
     let e = Database::open(d.path()).err().unwrap().to_string();
-    assert!(e.contains("manifest.json:") && e.contains("geometry.blob has"), "{e}");
+    assert!(e.contains("manifest.json:") && e.contains("geometry.blob is truncated"), "{e}");
     // With the manifest agreeing, the blob's own header refuses it.
     record_sizes(d.path());
     let e = Database::open(d.path()).err().unwrap().to_string();
