@@ -204,6 +204,23 @@ fn building_meshes(seed: u64, plan: &CityPlan) -> Vec<Mesh> {
         .collect()
 }
 
+/// A street-level walk along the city's first avenue, `steps` points from x = 5 m to 5 m before
+/// the far end, at z = 8 m and 1.7 m above the ground, each looking along +x: the band z ∈ [0, 18]
+/// is a street in every generated city (its first street line is 18–22 m wide). Points are
+/// clamped into `grid`'s region, so the walk can be queried.
+pub fn avenue_walk(grid: &ViewGrid, steps: usize) -> Vec<(Vec3, Vec3)> {
+    let r = grid.region;
+    let (x0, x1) = (r.min.x + 5.0, (r.max.x - 5.0).max(r.min.x + 5.0));
+    let y = (r.min.y + 0.2).min(r.max.y);
+    let z = (r.min.z + 8.0).min(r.max.z);
+    (0..steps)
+        .map(|i| {
+            let t = if steps > 1 { i as f32 / (steps - 1) as f32 } else { 0.0 };
+            (Vec3::new(x0 + (x1 - x0) * t, y, z), Vec3::X)
+        })
+        .collect()
+}
+
 /// The viewing-cell grid: the whole footprint (streets included) at [`EYE_HEIGHT`], one layer,
 /// with square-ish cells sized so the scale's own block count gives about
 /// [`CityScale::target_cells`] cells (tens of metres: a few street widths).

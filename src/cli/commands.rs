@@ -400,13 +400,28 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     }
     let report = hdov::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
     report_cleaned(&report);
-    if a.json {
-        let doc = json!({"scene": scene_path, "db": db_path, "build": report, "seconds": t.elapsed().as_secs_f64()});
-        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
-    } else {
+    if !a.json {
         println!("scene: {}", scene_path.display());
         print_build(&db_path, &report);
-        println!("demo finished in {:.1} s; next: hdov info {}", t.elapsed().as_secs_f64(), db_path.display());
+    }
+    let asked = super::query::demo_queries(&db_path, a.json)?;
+    if a.json {
+        let doc = json!({
+            "scene": scene_path,
+            "db": db_path,
+            "build": report,
+            "queries": asked.0,
+            "walk": asked.1,
+            "seconds": t.elapsed().as_secs_f64(),
+        });
+        println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
+    } else {
+        println!(
+            "demo finished in {:.1} s; next: hdov query {} --at X,Y,Z, hdov walk {} --path FILE",
+            t.elapsed().as_secs_f64(),
+            db_path.display(),
+            db_path.display()
+        );
     }
     Ok(())
 }

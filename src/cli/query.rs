@@ -155,7 +155,7 @@ pub struct WalkCmd {
 
 /// A walk's totals.
 #[derive(Serialize)]
-struct WalkSummary {
+pub(super) struct WalkSummary {
     steps: usize,
     flips: usize,
     pages_read: u64,
@@ -215,6 +215,11 @@ pub fn walk(a: WalkCmd) -> Result<()> {
             s.micros
         );
     }
+    print_summary(&summary);
+    Ok(())
+}
+
+pub(super) fn print_summary(summary: &WalkSummary) {
     println!(
         "{} steps, {} flips, {} pages read ({} hits, {} misses, {} prefetched), {} bytes loaded, {} evicted, mean {:.0} faces, {:.0} µs mean, {} µs p99",
         summary.steps,
@@ -229,10 +234,9 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         summary.micros_mean,
         summary.micros_p99
     );
-    Ok(())
 }
 
-fn summarise(steps: &[Step]) -> WalkSummary {
+pub(super) fn summarise(steps: &[Step]) -> WalkSummary {
     let n = steps.len().max(1) as f64;
     let mut micros: Vec<u64> = steps.iter().map(|s| s.micros).collect();
     micros.sort_unstable();
@@ -251,6 +255,54 @@ fn summarise(steps: &[Step]) -> WalkSummary {
         micros_mean: micros.iter().sum::<u64>() as f64 / n,
         micros_p99: p99,
     }
+}
+
+/// The demo's questions to its database: point queries in every mode from one street corner,
+/// and a walk along the first avenue. Prints them unless `json`; returns them as JSON.
+pub(super) fn demo_queries(db_path: &Path, json: bool) -> Result<(serde_json::Value, serde_json::Value)> {
+    let db = Database::open(db_path)?;
+    let grid = *db.grid().ok_or_else(|| Error::bad_file(db_path, "holds no grid"))?;
+    let path = hdov::city::avenue_walk(&grid, 150);
+    let at = path[path.len() / 3].0;
+    let ahead = Camera { look: Vec3::X, ..Camera::default() };
+    let asks = [
+        ("naive", QueryParams { mode: Mode::Naive, ..Default::default() }),
+        ("threshold η = 0", QueryParams { eta: 0.0, ..Default::default() }),
+        ("threshold η = 1e-3", QueryParams { eta: 1e-3, ..Default::default() }),
+        ("threshold η = 8e-3", QueryParams { eta: 8e-3, ..Default::default() }),
+        ("budget 20k faces", QueryParams { mode: Mode::Budget, budget: 20_000, ..Default::default() }),
+        ("vmsse τ = 1 px", QueryParams { mode: Mode::Vmsse, ..Default::default() }),
+        ("frustum, looking +x", QueryParams { mode: Mode::Frustum, camera: Some(ahead), ..Default::default() }),
+        ("η = 1e-3, looking +x", QueryParams { camera: Some(ahead), ..Default::default() }),
+    ];
+    let mut queries = Vec::new();
+    if !json {
+        println!("queries from {:?}:", at.to_array());
+    }
+    for (label, p) in asks {
+        let a = db.query(at, &p)?;
+        let s = &a.stats;
+        let nodes = a.items.iter().filter(|i| i.kind == hdov::ItemKind::Node).count();
+        if !json {
+            println!(
+                "  {label:<22} {:>5} items ({nodes:>2} internal LODs) {:>9} faces  {:>3} pages  {:>5} µs",
+                a.items.len(),
+                s.faces,
+                s.pages_read,
+                s.micros
+            );
+        }
+        queries.push(serde_json::json!({"query": label, "items": a.items.len(), "internal_lods": nodes, "stats": s}));
+    }
+    let params = SessionParams { cache: PolicyKind::DOV_TIME, cache_pages: Some(64), ..Default::default() };
+    let mut session = db.session(&params)?;
+    let steps = path.iter().map(|&(at, look)| session.step(at, Some(look))).collect::<Result<Vec<_>>>()?;
+    let summary = summarise(&steps);
+    if !json {
+        print!("walk along the first avenue, η = 1e-3, DoV-Time cache of 64 pages: ");
+        print_summary(&summary);
+    }
+    Ok((serde_json::Value::Array(queries), serde_json::to_value(&summary).expect("serialisable")))
 }
 
 /// A path file: `(line number, viewpoint, view direction)` per point.

@@ -15,6 +15,8 @@ pub mod camera;
 pub mod session;
 mod traverse;
 
+pub use traverse::visibility_bias;
+
 use std::fmt;
 use std::str::FromStr;
 use std::time::Instant;

@@ -102,24 +102,27 @@ impl Traversal<'_, '_> {
     }
 
     /// Whether to stop at child node `c` (DoV `d`, `nvo` visible objects), and at which level.
+    ///
+    /// Either mode's level is then made coarser until it draws no more than the visible objects
+    /// would at their coarsest (leaf LODs of barely visible objects are coarse, which eq. 5.4's
+    /// estimate from full-detail faces does not see); where no level does, the query descends.
+    /// So stopping never draws more than descending would.
     fn stop_at(&self, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Option<usize> {
         let chain = &self.db.catalog().node_lods[c as usize];
-        match self.params.mode {
-            Mode::Vmsse => self.coarsest_within_tau(chain, d, mbr, 1.0),
+        let level = match self.params.mode {
+            Mode::Vmsse => self.coarsest_within_tau(chain, d, mbr, 1.0)?,
             _ => {
                 let eta = self.params.eta;
                 // Eq. 5.4: stop where the internal LOD draws fewer faces than the visible leaves.
                 if !(d <= eta && self.internal_is_cheaper(c, nvo)) {
                     return None;
                 }
-                // Eq. 5.5's level, made coarser until it draws no more than the visible objects
-                // would at their coarsest (leaf LODs of barely visible objects are coarse, which
-                // eq. 5.4's estimate from full-detail faces does not see); descend if none does.
-                let shape = &self.db.catalog().node_shapes[c as usize];
-                let cap = u64::from(nvo) * shape.coarsest_object_faces / u64::from(shape.objects.max(1));
-                (pick(chain, d / eta)..chain.len()).find(|&l| u64::from(chain[l].faces) <= cap)
+                pick(chain, d / eta) // eq. 5.5
             }
-        }
+        };
+        let shape = &self.db.catalog().node_shapes[c as usize];
+        let cap = u64::from(nvo) * shape.coarsest_object_faces / u64::from(shape.objects.max(1));
+        (level..chain.len()).find(|&l| u64::from(chain[l].faces) <= cap)
     }
 
     /// `h·(1 + log_M s) < log_M(NVO)` (thesis eq. 5.4), with h = log_M m, m the node's leaf
@@ -278,7 +281,7 @@ fn object_scale(cols: &[f32; 16]) -> f64 {
 /// B(μ) = √μ, μ = DoV over the share of the sphere the box's bounding sphere covers from `at`
 /// (1 inside it): the visible fraction of what could be seen. Monotone, B(0) = 0, B(1) = 1;
 /// concave, so a half-hidden node keeps 71 % of its error weight (seed 000 §4 compares curves).
-pub(crate) fn visibility_bias(dov: f64, at: Vec3, mbr: &Aabb) -> f64 {
+pub fn visibility_bias(dov: f64, at: Vec3, mbr: &Aabb) -> f64 {
     let r = f64::from(mbr.extent().length()) / 2.0;
     let dist = f64::from(at.distance(mbr.center()));
     let cover = if dist <= r { 1.0 } else { (1.0 - (1.0 - (r / dist).powi(2)).sqrt()) / 2.0 };

@@ -1,0 +1,322 @@
+//! The query engine: point queries in every mode against the rules they promise, and
+//! walkthrough sessions.
+
+mod dov_common;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use glam::Vec3;
+use hdov::dov::BackendKind;
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
+use hdov::progress::Progress;
+use hdov::query::Camera;
+use hdov::{Answer, BuildParams, Database, ItemKind, Mode, QueryParams, Scene, SessionParams, VisibilityParams};
+use hdov_storage::{LayoutKind, PolicyKind};
+
+/// A block of 5 × 5 buildings with poles and low walls in the streets, a 4 × 1 × 4 grid over
+/// the streets at eye height, fan-out 4 (a tree of several levels).
+fn city(dir: &Path) -> Database {
+    let mut scene = dov_common::city_block(5, true);
+    scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
+    build(&scene, dir, 4)
+}
+
+fn build(scene: &Scene, dir: &Path, fanout: u32) -> Database {
+    let params = BuildParams {
+        fanout: Some(fanout),
+        visibility: Some(VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() }),
+        ..Default::default()
+    };
+    hdov::build(scene, dir, &params, false, &Progress::hidden()).unwrap();
+    Database::open(dir).unwrap()
+}
+
+/// One viewpoint in the middle of every cell.
+fn cell_centres(db: &Database) -> Vec<Vec3> {
+    let g = db.grid().unwrap();
+    (0..g.cell_count()).map(|c| g.cell_box(g.cell_coords(c)).center()).collect()
+}
+
+fn q(mode: Mode, eta: f64) -> QueryParams {
+    QueryParams { mode, eta, ..Default::default() }
+}
+
+/// Items without stats: what two answers must agree on.
+fn items(a: &Answer) -> Vec<(ItemKind, u32, u32, u32)> {
+    a.items.iter().map(|i| (i.kind, i.id, i.lod, i.faces)).collect()
+}
+
+#[test]
+fn eta_zero_is_the_naive_answer_in_every_layout() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let mut visible = 0;
+    for at in cell_centres(&db) {
+        let naive = db.query(at, &q(Mode::Naive, 0.0)).unwrap();
+        for layout in LayoutKind::ALL {
+            let p = QueryParams { layout: Some(layout), ..q(Mode::Threshold, 0.0) };
+            let zero = db.query(at, &p).unwrap();
+            assert_eq!(items(&zero), items(&naive), "{at} {layout}");
+            assert!(zero.items.iter().all(|i| i.kind == ItemKind::Object));
+            let again = db.query(at, &QueryParams { layout: Some(layout), ..q(Mode::Naive, 0.0) }).unwrap();
+            assert_eq!(items(&again), items(&naive), "naive through {layout}");
+        }
+        visible += naive.items.len();
+    }
+    assert!(visible > 100, "the cells see many objects ({visible})");
+}
+
+#[test]
+fn faces_never_grow_with_eta_and_every_item_is_visible() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let etas = [0.0, 1e-4, 3e-4, 1e-3, 3e-3, 8e-3, 3e-2, 0.1, 0.5, 1.0];
+    let mut stopped = 0;
+    for at in cell_centres(&db) {
+        let mut last = (u64::MAX, u64::MAX);
+        for eta in etas {
+            let a = db.query(at, &q(Mode::Threshold, eta)).unwrap();
+            assert!(a.stats.faces <= last.0, "{at}: η {eta} returned {} faces, a smaller η {}", a.stats.faces, last.0);
+            assert!(a.stats.pages_read <= last.1, "{at}: η {eta} read more pages");
+            last = (a.stats.faces, a.stats.pages_read);
+            for i in &a.items {
+                assert!(i.dov > 0.0, "{at}: η {eta}: {} returned with DoV {}", i.name, i.dov);
+                // An internal LOD stands for a subtree seen with at most η.
+                assert!(i.kind == ItemKind::Object || f64::from(i.dov) <= eta, "{at}: {} above η", i.name);
+            }
+            stopped += a.items.iter().filter(|i| i.kind == ItemKind::Node).count();
+        }
+    }
+    assert!(stopped > 0, "some queries stop at internal LODs");
+}
+
+#[test]
+fn an_object_behind_a_wall_is_never_returned() {
+    let mut scene = Scene::default();
+    scene.add_box("ground", Vec3::new(-60.0, -1.0, -60.0), Vec3::new(60.0, 0.0, 60.0));
+    scene.add_box("wall", Vec3::new(-50.0, 0.0, -0.5), Vec3::new(50.0, 20.0, 0.5));
+    scene.add_box("hidden", Vec3::new(-2.0, 0.0, -12.0), Vec3::new(2.0, 3.0, -8.0));
+    scene.add_box("shown", Vec3::new(-2.0, 0.0, 20.0), Vec3::new(2.0, 3.0, 24.0));
+    for i in 0..6 {
+        let x = -30.0 + 12.0 * i as f32;
+        scene.add_box(&format!("post{i}"), Vec3::new(x, 0.0, 30.0), Vec3::new(x + 1.0, 4.0, 31.0));
+    }
+    scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-20.0, 1.5, 5.0), Vec3::new(20.0, 2.0, 15.0)), [4, 1, 2]));
+    let tmp = tempfile::tempdir().unwrap();
+    let db = build(&scene, &tmp.path().join("db"), 2);
+    let hidden = 2;
+    for at in cell_centres(&db) {
+        for (mode, eta) in [
+            (Mode::Threshold, 0.0),
+            (Mode::Threshold, 1.0),
+            (Mode::Naive, 0.0),
+            (Mode::Budget, 0.0),
+            (Mode::Vmsse, 0.0),
+        ] {
+            let a = db.query(at, &q(mode, eta)).unwrap();
+            let objects: BTreeSet<u32> = a.items.iter().filter(|i| i.kind == ItemKind::Object).map(|i| i.id).collect();
+            assert!(!objects.contains(&hidden), "{mode} from {at} returns the hidden box");
+            if eta == 0.0 && matches!(mode, Mode::Threshold | Mode::Naive) {
+                assert!(objects.contains(&3), "{mode}: 'shown' is missing");
+            }
+        }
+        // Plain frustum culling knows nothing of the wall.
+        let f = db.query(at, &q(Mode::Frustum, 0.0)).unwrap();
+        assert!(f.items.iter().any(|i| i.id == hidden) && f.items.len() == scene.objects.len());
+        let ahead =
+            QueryParams { camera: Some(Camera { look: Vec3::NEG_Z, ..Default::default() }), ..q(Mode::Frustum, 0.0) };
+        let f = db.query(at, &ahead).unwrap();
+        assert!(f.items.iter().any(|i| i.id == hidden) && !f.items.iter().any(|i| i.id == 3), "culled to the view");
+    }
+}
+
+#[test]
+fn budgets_are_kept_or_the_overrun_is_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    for at in cell_centres(&db) {
+        let full = db.query(at, &q(Mode::Naive, 0.0)).unwrap().stats.faces;
+        for budget in [10, 200, 1_000, 5_000, full, 10 * full] {
+            let a = db.query(at, &QueryParams { budget, ..q(Mode::Budget, 0.0) }).unwrap();
+            assert!(
+                a.stats.faces <= budget || a.stats.over_budget,
+                "{at}: {} faces for a budget of {budget}",
+                a.stats.faces
+            );
+            assert!(a.items.iter().all(|i| i.dov > 0.0));
+            if budget >= full {
+                // A budget that holds the naive answer never returns less detail than it needs.
+                assert!(!a.stats.over_budget);
+            }
+        }
+    }
+}
+
+/// Vmsse's contract: every item's visibility-weighted screen error is within τ, except objects
+/// at full detail (nothing finer exists); a small τ draws more than a large one.
+#[test]
+fn vmsse_keeps_the_weighted_error_within_tau() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let cam = Camera::default();
+    let mut stopped = 0;
+    for at in cell_centres(&db) {
+        let mut faces = Vec::new();
+        for tau in [64.0, 4.0, 0.25] {
+            let a = db.query(at, &QueryParams { tau, ..q(Mode::Vmsse, 0.0) }).unwrap();
+            for i in &a.items {
+                let scale = match i.kind {
+                    ItemKind::Node => 1.0,
+                    ItemKind::Object => {
+                        let m = glam::Mat4::from_cols_array(&db.catalog().objects[i.id as usize].transform);
+                        f64::from(
+                            m.x_axis
+                                .truncate()
+                                .length()
+                                .max(m.y_axis.truncate().length())
+                                .max(m.z_axis.truncate().length()),
+                        )
+                    }
+                };
+                let sse = cam.screen_error(at, &i.mbr, f64::from(i.lod_ref.error) * scale);
+                let weighted = hdov::query::visibility_bias(f64::from(i.dov), at, &i.mbr) * sse;
+                assert!(
+                    weighted <= tau * 1.0001 || (i.kind == ItemKind::Object && i.lod == 0),
+                    "{at} τ {tau}: {} at {weighted} px",
+                    i.name
+                );
+                stopped += usize::from(i.kind == ItemKind::Node);
+            }
+            faces.push(a.stats.faces);
+        }
+        assert!(faces[2] >= faces[0], "{at}: τ 0.25 drew {} faces, τ 64 {}", faces[2], faces[0]);
+    }
+    assert!(stopped > 0, "vmsse stops at internal LODs somewhere");
+}
+
+#[test]
+fn sixteen_threads_agree_with_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let points = cell_centres(&db);
+    let modes = [q(Mode::Threshold, 1e-3), q(Mode::Naive, 0.0), q(Mode::Budget, 0.0), q(Mode::Vmsse, 0.0)];
+    let one: Vec<_> = points.iter().flat_map(|&at| modes.iter().map(move |p| (at, *p))).collect();
+    let expected: Vec<_> = one.iter().map(|(at, p)| items(&db.query(*at, p).unwrap())).collect();
+    std::thread::scope(|s| {
+        for t in 0..16 {
+            let (db, one, expected) = (&db, &one, &expected);
+            s.spawn(move || {
+                for round in 0..3 {
+                    for k in 0..one.len() {
+                        let i = (k + t * 7 + round) % one.len();
+                        let (at, p) = &one[i];
+                        assert_eq!(items(&db.query(*at, p).unwrap()), expected[i], "thread {t}");
+                    }
+                }
+            });
+        }
+    });
+}
+
+#[test]
+fn a_viewpoint_on_a_cell_border_belongs_to_the_upper_cell() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let g = *db.grid().unwrap();
+    let border = g.cell_box([1, 0, 2]).min + Vec3::new(0.0, 0.25, 0.0); // the corner of cells 0..1 × 1..2
+    let a = db.query(border, &q(Mode::Threshold, 1e-3)).unwrap();
+    assert_eq!(a.cell, [1, 0, 2]);
+    let inside = db.query(g.cell_box([1, 0, 2]).center(), &q(Mode::Threshold, 1e-3)).unwrap();
+    assert_eq!(items(&a), items(&inside));
+    for _ in 0..3 {
+        assert_eq!(items(&db.query(border, &q(Mode::Threshold, 1e-3)).unwrap()), items(&a));
+    }
+    // The region's upper face belongs to the last cell.
+    assert_eq!(db.query(g.region.max, &q(Mode::Naive, 0.0)).unwrap().cell, [3, 0, 3]);
+}
+
+#[test]
+fn bad_queries_are_one_line_errors_and_a_noisy_eta_warns() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let inside = Vec3::new(40.0, 1.7, 40.0);
+    let err = |at: Vec3, p: QueryParams| db.query(at, &p).unwrap_err().to_string();
+    assert!(err(Vec3::new(500.0, 1.7, 0.0), q(Mode::Threshold, 0.0)).starts_with("at: "));
+    assert!(err(Vec3::new(f32::NAN, 1.7, 0.0), q(Mode::Threshold, 0.0)).contains("not a finite point"));
+    assert!(err(inside, q(Mode::Threshold, 1.5)).starts_with("eta: "));
+    assert!(err(inside, q(Mode::Threshold, -0.1)).starts_with("eta: "));
+    let bad_cam =
+        QueryParams { camera: Some(Camera { look: Vec3::ZERO, ..Default::default() }), ..q(Mode::Naive, 0.0) };
+    assert!(err(inside, bad_cam).starts_with("camera: "));
+    for e in [err(Vec3::new(500.0, 1.7, 0.0), q(Mode::Naive, 0.0)), err(inside, q(Mode::Threshold, 2.0))] {
+        assert!(!e.contains('\n'));
+    }
+    // R = 32: one texel is ≈ 3.1e-4 of the sphere.
+    let a = db.query(inside, &q(Mode::Threshold, 1e-5)).unwrap();
+    assert!(a.warnings.iter().any(|w| w.contains("resolution floor")), "{:?}", a.warnings);
+    assert!(db.query(inside, &q(Mode::Threshold, 1e-2)).unwrap().warnings.is_empty());
+}
+
+#[test]
+fn a_walk_loads_each_lod_once_and_its_deltas_add_up() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    // Along a street and back: cells are re-entered, so resident LODs are reused.
+    let mut path: Vec<Vec3> = (0..40).map(|i| Vec3::new(-2.0 + 2.4 * i as f32, 1.7, 17.0)).collect();
+    path.extend(path.clone().into_iter().rev());
+    for budget in [None, Some(40_000u64), Some(4_000)] {
+        for cache in [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DOV_TIME] {
+            let params = SessionParams { cache, resident_bytes: budget, ..Default::default() };
+            let mut s = db.session(&params).unwrap();
+            let (mut loaded, mut evicted, mut flips) = (0i64, 0i64, 0);
+            for (k, &at) in path.iter().enumerate() {
+                let look = Some(if k < 40 { Vec3::X } else { Vec3::NEG_X });
+                let step = s.step(at, look).unwrap();
+                loaded += step.loaded_bytes as i64;
+                evicted += step.evicted_bytes as i64;
+                flips += usize::from(step.flipped);
+                assert_eq!(loaded - evicted, step.resident_bytes as i64, "deltas add up at step {k}");
+                assert_eq!(step.resident_bytes, s.resident_bytes());
+                if !step.flipped {
+                    assert_eq!((step.loaded, step.pages_read), (0, 0), "nothing is read while in a cell");
+                }
+                if let Some(b) = budget.filter(|_| !step.over_budget) {
+                    assert!(step.resident_bytes <= b, "{} resident over a budget of {b}", step.resident_bytes);
+                }
+                // What is drawn is resident, and culled to the view.
+                let resident: BTreeSet<u64> = s.resident().map(|(k, _)| k).collect();
+                assert!(s.frame_items(at, look).iter().all(|i| resident.contains(&i.lod_ref.offset)));
+                assert!(step.items as usize <= s.answer().unwrap().items.len());
+            }
+            assert!(flips >= 6, "the path crosses cells ({flips} flips)");
+            let total: u64 = s.resident().map(|(_, n)| n as u64).sum();
+            assert_eq!(total as i64, loaded - evicted);
+            if budget.is_none() {
+                assert_eq!(evicted, 0);
+                // Coming back, every cell's LODs are resident already: the way back loads nothing.
+                let mut back = db.session(&params).unwrap();
+                let mut loads = 0;
+                for (k, &at) in path.iter().enumerate() {
+                    let st = back.step(at, None).unwrap();
+                    if k >= 40 {
+                        loads += st.loaded;
+                    }
+                }
+                assert_eq!(loads, 0, "LODs already resident are not loaded again");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_session_refuses_a_step_outside_the_grid_and_goes_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let mut s = db.session(&SessionParams::default()).unwrap();
+    let first = s.step(Vec3::new(10.0, 1.7, 10.0), None).unwrap();
+    assert!(s.step(Vec3::new(-100.0, 1.7, 10.0), None).unwrap_err().to_string().starts_with("at: "));
+    let again = s.step(Vec3::new(10.5, 1.7, 10.0), None).unwrap();
+    assert!(first.flipped && !again.flipped && again.resident_bytes == first.resident_bytes);
+}
