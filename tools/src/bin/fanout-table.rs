@@ -1,0 +1,103 @@
+//! The fan-out table (issue "query engine"): for M ∈ {4, 8, 16, 32, 126}, the tree's nodes and
+//! height, each layout's bytes, and per η ∈ {0, 1e-4, 1e-3, 8e-3} the faces returned and pages
+//! read by threshold queries from every cell's centre (indexed-vertical), beside the naive
+//! method's pages. Databases are built once into `--cache DIR` and reused.
+//!
+//! `cargo run --release -p hdov-tools --bin fanout-table -- [--scale small|default|large] [--resolution R] [--cache DIR] [--csv FILE]`
+
+use std::path::PathBuf;
+
+use hdov::city::{CityParams, CityScale};
+use hdov::dov::BackendKind;
+use hdov::progress::Progress;
+use hdov::{BuildParams, Database, Mode, QueryParams, VisibilityParams};
+
+const FANOUTS: [u32; 5] = [4, 8, 16, 32, 126];
+const ETAS: [f64; 4] = [0.0, 1e-4, 1e-3, 8e-3];
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut scale = CityScale::Default;
+    let mut resolution = 64;
+    let mut cache = PathBuf::from("target/experiments");
+    let mut csv: Option<PathBuf> = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = || args.next().ok_or(format!("{a} needs a value"));
+        match a.as_str() {
+            "--scale" => scale = value()?.parse()?,
+            "--resolution" => resolution = value()?.parse()?,
+            "--cache" => cache = value()?.into(),
+            "--csv" => csv = Some(value()?.into()),
+            _ => return Err(format!("unknown argument {a}").into()),
+        }
+    }
+    let scene = hdov::city::generate(&CityParams { seed: 1, scale, ..Default::default() })?;
+    let mut rows = vec![format!(
+        "M,nodes,height,horizontal_bytes,vertical_bytes,indexed_vertical_bytes,naive_pages,{}",
+        ETAS.iter().map(|e| format!("faces_eta_{e},pages_eta_{e},internal_lods_eta_{e}")).collect::<Vec<_>>().join(",")
+    )];
+    println!(
+        "| M | nodes | height | bytes h / v / iv | naive pages | {} |",
+        ETAS.map(|e| format!("η = {e}: faces, pages")).join(" | ")
+    );
+    println!("|---|---|---|---|---|{}", "---|".repeat(ETAS.len()));
+    for m in FANOUTS {
+        let dir = cache.join(format!("{scale}-r{resolution}-m{m}.hdov"));
+        let db = match Database::open(&dir) {
+            Ok(db) if db.manifest().build.fanout == Some(m) => db,
+            _ => {
+                eprintln!("building {}", dir.display());
+                let params = BuildParams {
+                    fanout: Some(m),
+                    visibility: Some(VisibilityParams { resolution, backend: BackendKind::Cpu, ..Default::default() }),
+                    ..Default::default()
+                };
+                hdov::build(&scene, &dir, &params, true, &Progress::for_terminal(false))?;
+                Database::open(&dir)?
+            }
+        };
+        let info = db.info()?;
+        let grid = *db.grid().ok_or("no grid")?;
+        let centres: Vec<_> = (0..grid.cell_count()).map(|c| grid.cell_box(grid.cell_coords(c)).center()).collect();
+        let n = centres.len() as f64;
+        let mean = |p: &QueryParams| -> Result<(f64, f64, f64), hdov::Error> {
+            let (mut faces, mut pages, mut nodes) = (0.0, 0.0, 0.0);
+            for &at in &centres {
+                let a = db.query(at, p)?;
+                faces += a.stats.faces as f64;
+                pages += a.stats.pages_read as f64;
+                nodes += a.items.iter().filter(|i| i.kind == hdov::ItemKind::Node).count() as f64;
+            }
+            Ok((faces / n, pages / n, nodes / n))
+        };
+        let naive = mean(&QueryParams { mode: Mode::Naive, ..Default::default() })?;
+        let per_eta: Vec<_> =
+            ETAS.iter().map(|&eta| mean(&QueryParams { eta, ..Default::default() })).collect::<Result<_, _>>()?;
+        let bytes = |k: &str| info.layouts.get(k).map_or(0, |l| l.bytes);
+        println!(
+            "| {m} | {} | {} | {} / {} / {} | {:.1} | {} |",
+            info.nodes,
+            info.tree.height,
+            bytes("horizontal"),
+            bytes("vertical"),
+            bytes("indexed-vertical"),
+            naive.1,
+            per_eta.iter().map(|(f, p, _)| format!("{f:.0}, {p:.1}")).collect::<Vec<_>>().join(" | ")
+        );
+        rows.push(format!(
+            "{m},{},{},{},{},{},{:.2},{}",
+            info.nodes,
+            info.tree.height,
+            bytes("horizontal"),
+            bytes("vertical"),
+            bytes("indexed-vertical"),
+            naive.1,
+            per_eta.iter().map(|(f, p, i)| format!("{f:.1},{p:.2},{i:.2}")).collect::<Vec<_>>().join(",")
+        ));
+    }
+    if let Some(path) = csv {
+        std::fs::write(&path, rows.join("\n") + "\n")?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
