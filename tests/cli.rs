@@ -390,3 +390,73 @@ fn detail_model_from_an_obj_file() {
     let statues = scene.objects.iter().filter(|o| o.mesh == 0).count();
     assert!(statues > 1, "the model is instanced ({statues} instances)");
 }
+
+/// `hdov query` and `hdov walk` print the documented JSON, and refuse bad viewpoints and paths
+/// in one line.
+#[test]
+fn query_and_walk_answer_in_json() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city")]).status.success());
+    let o = hdov(&[
+        "build",
+        &s("city/city.json"),
+        "--out",
+        &s("db"),
+        "--resolution",
+        "16",
+        "--backend",
+        "cpu",
+        "--fanout",
+        "4",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", &s("db"), "--json"]).stdout).unwrap();
+    let r = &info["grid"]["region"];
+    let (x, z) = (r[0].as_f64().unwrap() + 5.0, r[2].as_f64().unwrap() + 8.0);
+    let at = format!("{x},1.7,{z}");
+    for mode in ["threshold", "naive", "budget", "vmsse", "frustum"] {
+        let o = hdov(&["query", &s("db"), "--at", &at, "--mode", mode, "--json"]);
+        assert!(o.status.success(), "{mode}: {}", stderr(&o));
+        let a: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(a["cell"].as_array().unwrap().len(), 3);
+        assert!(a["eta"].is_number() && a["mode"] == mode);
+        let items = a["items"].as_array().unwrap();
+        assert!(!items.is_empty(), "{mode} sees something");
+        for i in items {
+            for key in ["kind", "id", "name", "lod", "faces", "dov"] {
+                assert!(!i[key].is_null(), "{mode}: item without {key}: {i}");
+            }
+        }
+        for key in ["pages_read", "nodes_visited", "faces", "micros"] {
+            assert!(a["stats"][key].is_u64(), "{mode}: stats without {key}");
+        }
+    }
+    let far = format!("{},1.7,{z}", x + 1e5);
+    assert_refused(&hdov(&["query", &s("db"), "--at", &far]), "--at: ");
+    assert_refused(&hdov(&["query", &s("db"), "--at", &at, "--eta", "3"]), "--eta");
+    // A walk: a CSV path, with comments, view directions, and a step back into a cell.
+    let mut path = String::from("# x,y,z[,dx,dy,dz]\n");
+    for k in 0..12 {
+        path += &format!("{},1.7,{z},1,0,0\n", x + 6.0 * k as f64);
+    }
+    path += &format!("{x},1.7,{z}\n");
+    std::fs::write(s("walk.csv"), path).unwrap();
+    let o = hdov(&["walk", &s("db"), "--path", &s("walk.csv"), "--cache", "dov-time", "--cache-pages", "8", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let w: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let steps = w["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 13);
+    for st in steps {
+        for key in
+            ["step", "at", "cell", "flipped", "loaded", "evicted", "pages_read", "hits", "misses", "faces", "micros"]
+        {
+            assert!(!st[key].is_null(), "step without {key}: {st}");
+        }
+    }
+    assert!(steps[0]["flipped"] == true && w["summary"]["flips"].as_u64().unwrap() >= 2);
+    std::fs::write(s("bad.csv"), format!("{x},1.7,{z}\n{x},oops,{z}\n")).unwrap();
+    assert_refused(&hdov(&["walk", &s("db"), "--path", &s("bad.csv")]), "bad.csv: line 2");
+    std::fs::write(s("out.csv"), format!("{x},1.7,{z}\n{},1.7,{z}\n", x + 1e5)).unwrap();
+    assert_refused(&hdov(&["walk", &s("db"), "--path", &s("out.csv")]), "out.csv: line 2");
+}
