@@ -7,9 +7,11 @@ use std::path::Path;
 use glam::{Mat4, Vec3};
 use hdov::scene::{BaseMesh, Object, Scene};
 
+use hdov::db::TREE_FILE;
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
 use hdov::{BuildParams, Database};
+use hdov_storage::PageReader;
 
 /// A small town: `n × n` boxes of varied height, each its own base mesh, and a sphere instanced
 /// on every other street corner (so instancing is exercised).
@@ -55,12 +57,16 @@ fn tree_pages_and_lods_round_trip() {
     let db = Database::open(&dir).unwrap();
     assert_eq!(db.node_count() as usize, tree.nodes.len());
     assert!(tree.height() >= 3, "a 256-byte page makes a deep enough tree to test");
+    let mut pages = PageReader::uncached();
     for (id, node) in tree.nodes.iter().enumerate() {
-        let page = db.node(id as u32).unwrap();
+        let page = db.read_node(id as u32, 0.0, &mut pages).unwrap();
         assert_eq!(&page.node, node);
         assert_eq!(page.subtree_objects as usize, tree.objects_under(id as u32).len());
+        assert_eq!(db.node(id as u32).unwrap(), page, "a one-off read gives the same node");
     }
-    assert_eq!(db.tree_pages_read(), tree.nodes.len() as u64, "every node read is one counted page");
+    let io = pages.io();
+    assert_eq!(io.file(TREE_FILE), tree.nodes.len() as u64, "every node read is one counted page");
+    assert_eq!(io.requested(), io.pages_read(), "one reader, no cache, no node read twice");
     // Instanced geometry is stored once: one chain per base mesh, not per object.
     assert_eq!(db.catalog().mesh_lods.len(), scene.meshes.len());
     assert!(db.catalog().objects.len() > scene.meshes.len());

@@ -7,7 +7,7 @@ use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shar
 use hdov::progress::Progress;
 use hdov::rtree::RTree;
 use hdov::{BuildParams, Database, VisibilityParams};
-use hdov_storage::{LayoutKind, ReadMode};
+use hdov_storage::{LayoutKind, PageReader};
 use proptest::prelude::*;
 
 const RESOLUTION: u32 = 24;
@@ -52,9 +52,11 @@ fn fixture() -> Fixture {
 fn layouts_agree_with_each_other_and_with_the_precompute() {
     let f = fixture();
     assert_eq!(f.db.layouts(), LayoutKind::ALL.to_vec());
-    let readers = std::cell::RefCell::new(
-        LayoutKind::ALL.iter().map(|&k| f.db.layout(k, ReadMode::Mmap).unwrap()).collect::<Vec<_>>(),
-    );
+    // One cursor per layout, all reading through one page reader (one read buffer per file).
+    let readers = std::cell::RefCell::new((
+        LayoutKind::ALL.iter().map(|&k| f.db.layout(k).unwrap().cursor()).collect::<Vec<_>>(),
+        PageReader::uncached(),
+    ));
     let cells = f.expected.cell_count;
     let nodes = f.db.node_count();
     assert!(nodes > 3, "a 512-byte page gives a tree with several nodes");
@@ -63,20 +65,27 @@ fn layouts_agree_with_each_other_and_with_the_precompute() {
     let config = ProptestConfig { cases: 200, ..Default::default() };
     proptest!(config, |(cell in 0..cells, node in 0..nodes)| {
         let want = f.expected.cells[cell as usize].iter().find(|(n, _)| *n == node).map(|(_, v)| v.clone());
-        for r in readers.borrow_mut().iter_mut() {
-            r.flip_to_cell(cell).unwrap();
-            prop_assert_eq!(r.vpage(node).unwrap(), want.clone(), "{} cell {} node {}", r.kind(), cell, node);
+        let (cursors, pages) = &mut *readers.borrow_mut();
+        for r in cursors.iter_mut() {
+            r.flip_to_cell(cell, pages).unwrap();
+            let kind = r.layout().kind();
+            prop_assert_eq!(r.vpage(node, 0.0, pages).unwrap(), want.clone(), "{} cell {} node {}", kind, cell, node);
         }
     });
     // And exhaustively, every (cell, node); a horizontal flip reads nothing.
+    let (cursors, pages) = &mut *readers.borrow_mut();
     for cell in 0..cells {
-        for r in readers.borrow_mut().iter_mut() {
-            let flip = r.flip_to_cell(cell).unwrap();
-            if r.kind() == LayoutKind::Horizontal {
+        for r in cursors.iter_mut() {
+            let flip = r.flip_to_cell(cell, pages).unwrap();
+            let kind = r.layout().kind();
+            if kind == LayoutKind::Horizontal {
                 assert_eq!(flip.pages_read, 0);
             }
-            let got: Vec<_> = (0..nodes).filter_map(|n| r.vpage(n).unwrap().map(|v| (n, v))).collect();
-            assert_eq!(got, f.expected.cells[cell as usize], "{} cell {cell}", r.kind());
+            let got: Vec<_> = (0..nodes).filter_map(|n| r.vpage(n, 0.0, pages).unwrap().map(|v| (n, v))).collect();
+            assert_eq!(got, f.expected.cells[cell as usize], "{} cell {cell}", kind);
         }
+    }
+    for io in pages.io().files {
+        assert_eq!(io.requested, io.hits + io.pages_read, "{io:?}");
     }
 }

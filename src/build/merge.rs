@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use hdov_storage::{ReadMode, VData};
+use hdov_storage::VData;
 
 use super::vpages::read_cells;
 use super::{VisibilityParams, begin_write, write_layouts, write_manifest};
@@ -120,8 +120,8 @@ pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> 
     };
     for s in &dbs {
         let range = s.shard.cells(&grid);
-        let mut reader = s.db.layout(s.db.layouts()[0], ReadMode::Mmap)?;
-        for (cell, pages) in read_cells(&mut reader, range.start as u32..range.end as u32)? {
+        let layout = s.db.layout(s.db.layouts()[0])?;
+        for (cell, pages) in read_cells(layout, range.start as u32..range.end as u32)? {
             data.cells[cell as usize] = pages;
         }
         info.cells_computed += s.info.cells_computed;

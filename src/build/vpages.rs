@@ -4,7 +4,7 @@
 //! child node's (DoV, NVO), for a leaf the object's (DoV, 1 if visible else 0). A node gets a
 //! V-page in a cell only if some entry is visible there: hidden subtrees cost no storage.
 
-use hdov_storage::{LayoutReader, VData, VEntry};
+use hdov_storage::{Layout, PageReader, VData, VEntry};
 
 use crate::dov::precompute::CellDov;
 use crate::error::Result;
@@ -59,14 +59,19 @@ pub fn vdata_from_cells(tree: &RTree, cell_count: u32, cells: &[(u32, CellDov)])
 /// The visible V-pages of one cell: (node id, V-entries), ascending node id.
 pub type CellVPages = Vec<(u32, Vec<VEntry>)>;
 
-/// Reads the V-pages of `cells` back from a layout (for merging shard databases).
-pub fn read_cells(reader: &mut LayoutReader, cells: std::ops::Range<u32>) -> Result<Vec<(u32, CellVPages)>> {
+/// Reads the V-pages of `cells` back from a layout (for merging shard databases), through a
+/// cursor and an uncached page reader of its own.
+pub fn read_cells(layout: &Layout, cells: std::ops::Range<u32>) -> Result<Vec<(u32, CellVPages)>> {
+    let mut reader = PageReader::uncached();
+    let mut cursor = layout.cursor();
     let mut out = Vec::with_capacity(cells.len());
     for cell in cells {
-        reader.flip_to_cell(cell)?;
+        cursor.flip_to_cell(cell, &mut reader)?;
+        // Vertical layouts name the nodes they store; horizontal is asked node by node.
+        let nodes = cursor.visible_nodes().unwrap_or_else(|| (0..layout.node_count()).collect());
         let mut pages = Vec::new();
-        for node in 0..reader.node_count() {
-            if let Some(v) = reader.vpage(node)? {
+        for node in nodes {
+            if let Some(v) = cursor.vpage(node, 0.0, &mut reader)? {
                 pages.push((node, v));
             }
         }

@@ -9,7 +9,6 @@ use super::{Database, FileEntry, VisibilityInfo};
 use crate::build::BuildParams;
 use crate::error::Result;
 use crate::rtree::TreeStats;
-use hdov_storage::ReadMode;
 
 /// A database described: counts, grid, build parameters, files and every layout's costs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -67,13 +66,13 @@ pub struct MeanMax {
 }
 
 impl Database {
-    /// Describes the database. Opens each layout's reader (headers and metadata only).
+    /// Describes the database (from the manifest and each layout's metadata; no page read).
     pub fn info(&self) -> Result<Info> {
         let m = self.manifest();
         let c = &m.counts;
         let mut layouts = BTreeMap::new();
         for kind in self.layouts() {
-            let s = self.layout(kind, ReadMode::Mmap)?.summary();
+            let s = self.layout(kind)?.summary();
             let written = m.visibility.iter().flat_map(|v| &v.layouts).find(|l| l.name == kind.name());
             let visible_pages = (s.visible_nodes_mean * f64::from(s.cell_count)).max(1.0);
             layouts.insert(

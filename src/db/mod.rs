@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::scene::Mesh;
 use catalog::{Catalog, LodRef};
-use hdov_storage::{BlobFile, LayoutKind, LayoutReader, PageFile, ReadMode};
+use hdov_storage::{BlobFile, Layout, LayoutKind, PageFile, PageReader, ReadMode};
 pub use manifest::{Counts, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
 use tree_page::NodePage;
 
@@ -34,18 +34,22 @@ pub const TREE_KIND: [u8; 4] = *b"TREE";
 pub const GEOMETRY_KIND: [u8; 4] = *b"GEOM";
 pub const CATALOG_KIND: [u8; 4] = *b"CATL";
 
-/// An open, read-only database. Tree pages are read through memory maps and counted.
+/// An open, read-only database: `Send + Sync`, so any number of threads may query it at once,
+/// each reading pages through its own [`PageReader`] (which counts them) and its own
+/// [`LayoutCursor`](hdov_storage::LayoutCursor)s.
 ///
 /// Opening validates every file (the manifest's fields and recorded sizes, the page and blob
-/// headers, the catalog's references into the tree and the geometry); pages and records are
-/// checked against their checksums when read. A damaged database gives a one-line error that
-/// names the file, never a panic.
+/// headers, the catalog's references into the tree and the geometry, every layout's metadata);
+/// pages and records are checked against their checksums when read. A damaged database gives a
+/// one-line error that names the file, never a panic.
 pub struct Database {
     dir: PathBuf,
     manifest: Manifest,
     catalog: Catalog,
     tree: PageFile,
     geometry: BlobFile,
+    /// The layouts the manifest lists, opened once, in its order.
+    layouts: Vec<Layout>,
 }
 
 impl Database {
@@ -90,7 +94,28 @@ impl Database {
             ));
         }
         catalog.check(nodes as usize, geometry.file_len()).map_err(|r| Error::bad_file(&catalog_path, r))?;
-        Ok(Database { dir: dir.to_path_buf(), manifest, catalog, tree, geometry })
+        let kinds = manifest.build.visibility.iter().flat_map(|v| v.layouts.iter().copied());
+        let layouts = kinds
+            .map(|kind| {
+                let layout = Layout::open(dir, kind, mode)?;
+                // Named by its first file (the index, where it has one), which records the counts.
+                let file = dir.join(kind.file_names()[0]);
+                if u64::from(layout.node_count()) != nodes {
+                    return Err(Error::bad_file(
+                        file,
+                        format!("{kind} layout has {} nodes, the tree {nodes}", layout.node_count()),
+                    ));
+                }
+                if u64::from(layout.cell_count()) != manifest.counts.cells {
+                    return Err(Error::bad_file(
+                        file,
+                        format!("{kind} layout has {} cells, the grid {}", layout.cell_count(), manifest.counts.cells),
+                    ));
+                }
+                Ok(layout)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Database { dir: dir.to_path_buf(), manifest, catalog, tree, geometry, layouts })
     }
 
     /// The database directory.
@@ -117,51 +142,41 @@ impl Database {
         self.manifest.counts.nodes as u32
     }
 
-    /// Reads and validates one node page (counted as one page read), its pointers against the
-    /// depth-first numbering too (see [`tree_page::check_position`]).
-    pub fn node(&self, id: u32) -> Result<NodePage> {
-        let bytes = self.tree.page(id as u64)?;
+    /// Reads and validates one node page through `pages` (which counts it: requested, and
+    /// read unless its read buffer or cache held it). `priority` is the cache policy's number
+    /// for the page: the node's DoV, 0 when unknown.
+    pub fn read_node(&self, id: u32, priority: f64, pages: &mut PageReader) -> Result<NodePage> {
+        let bytes = pages.page(&self.tree, u64::from(id), priority)?;
         tree_page::decode(&bytes, self.node_count(), self.catalog.objects.len() as u32)
             .and_then(|page| tree_page::check_position(&page, id).map(|()| page))
             .map_err(|r| Error::bad_file(self.dir.join(TREE_FILE), format!("node {id}: {r}")))
     }
 
-    /// Pages of `tree.pages` read since open or the last reset.
-    pub fn tree_pages_read(&self) -> u64 {
-        self.tree.reads()
+    /// Reads and validates one node page, uncounted: a one-off read through a
+    /// [`PageReader::uncached`] of its own. A query reads through its own reader
+    /// ([`read_node`](Self::read_node)).
+    pub fn node(&self, id: u32) -> Result<NodePage> {
+        self.read_node(id, 0.0, &mut PageReader::uncached())
     }
 
-    pub fn reset_io(&self) {
-        self.tree.reset_reads();
+    /// `tree.pages`: the page file the nodes are read from (for
+    /// [`PageReader::set_priority`] and [`IoStats`](hdov_storage::IoStats) by its name).
+    pub fn tree_file(&self) -> &PageFile {
+        &self.tree
     }
 
     /// The layouts this database holds, in the order they were written.
     pub fn layouts(&self) -> Vec<LayoutKind> {
-        // Checked on open to be the parsed names of the layouts written.
-        self.manifest.build.visibility.iter().flat_map(|v| v.layouts.iter().copied()).collect()
+        self.layouts.iter().map(Layout::kind).collect()
     }
 
-    /// Opens the V-page reader of one layout.
-    pub fn layout(&self, kind: LayoutKind, mode: ReadMode) -> Result<LayoutReader> {
-        if !self.layouts().contains(&kind) {
-            return Err(Error::bad_param("layout", format!("{} holds no {kind} layout", self.dir.display())));
-        }
-        let reader = LayoutReader::open(&self.dir, kind, mode)?;
-        // Named by its first file (the index, where it has one), which records the counts.
-        let file = self.dir.join(kind.file_names()[0]);
-        if reader.node_count() != self.node_count() {
-            return Err(Error::bad_file(
-                file,
-                format!("{kind} layout has {} nodes, the tree {}", reader.node_count(), self.node_count()),
-            ));
-        }
-        if u64::from(reader.cell_count()) != self.manifest.counts.cells {
-            return Err(Error::bad_file(
-                file,
-                format!("{kind} layout has {} cells, the grid {}", reader.cell_count(), self.manifest.counts.cells),
-            ));
-        }
-        Ok(reader)
+    /// One layout's V-pages, opened with the database (read them through a
+    /// [`Layout::cursor`]).
+    pub fn layout(&self, kind: LayoutKind) -> Result<&Layout> {
+        self.layouts
+            .iter()
+            .find(|l| l.kind() == kind)
+            .ok_or_else(|| Error::bad_param("layout", format!("{} holds no {kind} layout", self.dir.display())))
     }
 
     /// The encoded bytes of one LOD level in `geometry.blob` (checksum verified): what a
@@ -176,5 +191,17 @@ impl Database {
         let mesh: Mesh = crate::record::decode(bytes, &self.dir.join(GEOMETRY_FILE), "mesh record")?;
         mesh.check().map_err(|r| Error::bad_file(self.dir.join(GEOMETRY_FILE), r))?;
         Ok(mesh)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Database;
+
+    #[test]
+    fn database_is_send_and_sync() {
+        // A static assertion: this compiles only if any number of threads may share one.
+        const fn shared<T: Send + Sync>() {}
+        const _: () = shared::<Database>();
     }
 }

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group};
 use hdov_storage::synthetic::{SyntheticSpec, synthetic_vdata};
-use hdov_storage::{LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, write_layout};
+use hdov_storage::{Layout, LayoutCursor, LayoutKind, LayoutOptions, PageReader, ReadMode, VData, write_layout};
 
 fn spec(fanout: u16, levels: u32, cells: u32) -> SyntheticSpec {
     SyntheticSpec { cells, fanout, levels, reach: 0.02, visible_share: 0.3, seed: 3 }
@@ -22,10 +22,16 @@ fn write_all(dir: &Path, data: &VData) {
 }
 
 /// Visible V-pages of `cell` read in dfs order, as a query that sees everything would.
-fn read_cell(r: &mut LayoutReader, cell: u32, nodes: &[u32], buf: &mut Vec<hdov_storage::VEntry>) {
-    r.flip_to_cell(cell).expect("flip");
+fn read_cell(
+    r: &mut LayoutCursor<'_>,
+    pages: &mut PageReader,
+    cell: u32,
+    nodes: &[u32],
+    buf: &mut Vec<hdov_storage::VEntry>,
+) {
+    r.flip_to_cell(cell, pages).expect("flip");
     for &n in nodes {
-        black_box(r.vpage_into(n, buf).expect("vpage"));
+        black_box(r.vpage_into(n, 0.0, pages, buf).expect("vpage"));
     }
 }
 
@@ -40,17 +46,20 @@ fn print_page_table() {
         let dir = tempfile::tempdir().expect("tempdir");
         write_all(dir.path(), &data);
         for kind in LayoutKind::ALL {
-            let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).expect("open");
+            let layout = Layout::open(dir.path(), kind, ReadMode::Mmap).expect("open");
+            let mut r = layout.cursor();
+            // No cache: each cell starts cold (reset_io forgets the read buffers).
+            let mut pages = PageReader::uncached();
             let (mut flip, mut vp) = (0u64, 0u64);
             let mut buf = Vec::new();
             for cell in 0..st.cell_count {
-                r.reset_io();
-                flip += r.flip_to_cell(cell).expect("flip").pages_read;
+                pages.reset_io();
+                flip += r.flip_to_cell(cell, &mut pages).expect("flip").pages_read;
                 let nodes: Vec<u32> = data.cells[cell as usize].iter().map(|(n, _)| *n).collect();
                 for n in nodes {
-                    r.vpage_into(n, &mut buf).expect("vpage");
+                    r.vpage_into(n, 0.0, &mut pages, &mut buf).expect("vpage");
                 }
-                vp += r.io().file(kind.file_names().last().expect("vpages file"));
+                vp += pages.io().file(kind.file_names().last().expect("vpages file"));
             }
             let c = f64::from(st.cell_count);
             println!(
@@ -59,7 +68,7 @@ fn print_page_table() {
                 st.visible_mean,
                 flip as f64 / c,
                 vp as f64 / c,
-                r.summary().bytes
+                layout.summary().bytes
             );
         }
     }
@@ -77,26 +86,30 @@ fn bench_layouts(c: &mut Criterion) {
         let m = if mode == ReadMode::Mmap { "mmap" } else { "pread" };
         let mut flip = c.benchmark_group(format!("flip/{m}"));
         for kind in LayoutKind::ALL {
-            let mut r = LayoutReader::open(dir.path(), kind, mode).expect("open");
+            let layout = Layout::open(dir.path(), kind, mode).expect("open");
+            let mut r = layout.cursor();
+            let mut pages = PageReader::uncached();
             let mut cell = 0;
             flip.bench_function(kind.name(), |b| {
                 b.iter(|| {
                     // Consecutive cells: every iteration is a real flip.
                     cell = (cell + 1) % cells;
-                    black_box(r.flip_to_cell(cell).expect("flip"));
+                    black_box(r.flip_to_cell(cell, &mut pages).expect("flip"));
                 })
             });
         }
         flip.finish();
         let mut fetch = c.benchmark_group(format!("flip+all-visible-vpages/{m}"));
         for kind in LayoutKind::ALL {
-            let mut r = LayoutReader::open(dir.path(), kind, mode).expect("open");
+            let layout = Layout::open(dir.path(), kind, mode).expect("open");
+            let mut r = layout.cursor();
+            let mut pages = PageReader::uncached();
             let mut buf = Vec::new();
             let mut cell = 0;
             fetch.bench_function(kind.name(), |b| {
                 b.iter(|| {
                     cell = (cell + 1) % cells;
-                    read_cell(&mut r, cell, &visible[cell as usize], &mut buf);
+                    read_cell(&mut r, &mut pages, cell, &visible[cell as usize], &mut buf);
                 })
             });
         }

@@ -8,7 +8,7 @@
 //! see ENTRY_PERCENT % of their entries.
 
 use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
-use hdov_storage::{DovCodec, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VEntry, write_layout};
+use hdov_storage::{DovCodec, Layout, LayoutKind, LayoutOptions, ReadMode, VEntry, write_layout};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
@@ -65,7 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let dir = root.path().join(format!("{kind}-{dov}-{sparse}"));
                 std::fs::create_dir(&dir)?;
                 let size = write_layout(&dir, kind, &data, &LayoutOptions { dov, sparse, ..Default::default() })?;
-                let s = LayoutReader::open(&dir, kind, ReadMode::Mmap)?.summary();
+                let s = Layout::open(&dir, kind, ReadMode::Mmap)?.summary();
                 println!(
                     "| {kind} | {dov} | {} | {} | {} | {} | {:.2} / {} |",
                     if sparse { "yes" } else { "no" },

@@ -21,10 +21,11 @@ use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use crate::error::{Error, Result, path_str};
-use crate::io_stats::PageCounter;
 use crate::le::{tag_str, u32_at, u64_at};
+use crate::page_reader::PageReader;
 
 /// The page file format's magic number.
 pub const PAGE_MAGIC: [u8; 8] = *b"HDOVPAGE";
@@ -140,19 +141,29 @@ enum Backing {
     Pread(File),
 }
 
-/// A read-only page file; every [`page`](Self::page) call is counted.
+/// The next [`PageFile::id`]: ids are unique within the process (they wrap only after 2^32
+/// opens).
+static NEXT_ID: AtomicU32 = AtomicU32::new(0);
+
+/// A read-only page file. Its pages are read through a [`PageReader`], which counts every
+/// request and every read (the file itself counts nothing). Immutable after open, so it is
+/// `Send + Sync`: any number of readers on any threads may read it at once.
 pub struct PageFile {
     path: PathBuf,
+    /// The file's name inside its directory, as [`IoStats`](crate::IoStats) reports it.
+    name: String,
+    /// Process-unique: the `file` of the [`PageKey`](crate::PageKey)s of its pages.
+    id: u32,
     backing: Backing,
     page_size: u32,
     page_count: u64,
-    reads: PageCounter,
 }
 
 impl std::fmt::Debug for PageFile {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("PageFile")
             .field("path", &self.path)
+            .field("id", &self.id)
             .field("page_size", &self.page_size)
             .field("page_count", &self.page_count)
             .finish()
@@ -200,11 +211,22 @@ impl PageFile {
             }
             ReadMode::Pread => Backing::Pread(file),
         };
-        Ok(Self { path: path.to_path_buf(), backing, page_size, page_count, reads: PageCounter::default() })
+        let name = path.file_name().map_or_else(|| path_str(path), |n| n.to_string_lossy().into_owned());
+        let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
+        Ok(Self { path: path.to_path_buf(), name, id, backing, page_size, page_count })
     }
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+    /// The file's name inside its directory (e.g. `vpages.vertical`).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// A number unique to this open file within the process, assigned at open: the `file` of
+    /// its pages' [`PageKey`](crate::PageKey)s in a [`PageCache`](crate::PageCache).
+    pub fn id(&self) -> u32 {
+        self.id
     }
     pub fn page_size(&self) -> u32 {
         self.page_size
@@ -222,15 +244,15 @@ impl PageFile {
         (self.page_count + 1) * u64::from(self.page_size)
     }
 
-    /// The payload of data page `n` (capacity bytes), checksum verified. Counts one page read.
-    pub fn page(&self, n: u64) -> Result<Cow<'_, [u8]>> {
+    /// The payload of data page `n` (capacity bytes), checksum verified: one read from the
+    /// file. Only [`PageReader::page`] calls it, so that every read is counted in one place.
+    pub(crate) fn read_page(&self, n: u64) -> Result<Cow<'_, [u8]>> {
         if n >= self.page_count {
             return Err(Error::invalid(
                 &self.path,
                 format!("page {n} out of range (file has {} pages)", self.page_count),
             ));
         }
-        self.reads.add(1);
         let ps = self.page_size as usize;
         // n < page_count and (page_count+1)*page_size fits the file (checked at open).
         let start = (n + 1) * u64::from(self.page_size);
@@ -262,17 +284,10 @@ impl PageFile {
         })
     }
 
-    /// Reads every page, checking each checksum (counted like any read).
+    /// Reads every page, checking each checksum (through a reader of its own, with no cache).
     pub fn verify(&self) -> Result<()> {
-        (0..self.page_count).try_for_each(|n| self.page(n).map(drop))
-    }
-
-    /// Page reads since open or the last [`reset_reads`](Self::reset_reads).
-    pub fn reads(&self) -> u64 {
-        self.reads.get()
-    }
-    pub fn reset_reads(&self) {
-        self.reads.reset();
+        let mut pages = PageReader::uncached();
+        (0..self.page_count).try_for_each(|n| pages.page(self, n, 0.0).map(drop))
     }
 }
 

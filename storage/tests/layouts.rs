@@ -6,7 +6,9 @@ use std::path::Path;
 use hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE;
 use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
 use hdov_storage::vpage::LOG_DOV_REL_ERROR;
-use hdov_storage::{DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, ReadMode, VData, VEntry, write_layout};
+use hdov_storage::{
+    DovCodec, Error, Layout, LayoutKind, LayoutOptions, PageReader, ReadMode, VData, VEntry, write_layout,
+};
 use proptest::prelude::*;
 
 fn write_all(dir: &Path, data: &VData, opts: &LayoutOptions) {
@@ -47,16 +49,17 @@ fn check_equal(got: &[VEntry], want: &[VEntry], codec: DovCodec) {
 fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
     for kind in LayoutKind::ALL {
         for mode in [ReadMode::Mmap, ReadMode::Pread] {
-            let mut r = LayoutReader::open(dir, kind, mode).unwrap();
-            assert_eq!(r.cell_count(), data.cell_count);
-            assert_eq!(r.node_count() as usize, data.node_fanout.len());
-            assert_eq!(r.io().pages_read(), 0);
+            let layout = Layout::open(dir, kind, mode).unwrap();
+            assert_eq!(layout.cell_count(), data.cell_count);
+            assert_eq!(layout.node_count() as usize, data.node_fanout.len());
+            let mut pages = PageReader::uncached();
+            let mut r = layout.cursor();
             let mut buf = Vec::new();
             for cell in 0..data.cell_count {
-                r.flip_to_cell(cell).unwrap();
+                r.flip_to_cell(cell, &mut pages).unwrap();
                 for node in 0..data.node_fanout.len() as u32 {
                     let want = expected(data, cell as usize, node);
-                    let visible = r.vpage_into(node, &mut buf).unwrap();
+                    let visible = r.vpage_into(node, 0.0, &mut pages, &mut buf).unwrap();
                     assert_eq!(visible, want.is_some(), "{kind} cell {cell} node {node}");
                     if let Some(want) = want {
                         check_equal(&buf, want, codec);
@@ -64,6 +67,9 @@ fn check_layouts(dir: &Path, data: &VData, codec: DovCodec) {
                         assert!(buf.is_empty());
                     }
                 }
+            }
+            for f in pages.io().files {
+                assert_eq!(f.requested, f.hits + f.pages_read, "{kind}: {f:?}");
             }
         }
     }
@@ -193,10 +199,12 @@ fn sparse_encoding_picks_the_smaller_form() {
 }
 
 fn check_layouts_one(dir: &Path, kind: LayoutKind, data: &VData) {
-    let mut r = LayoutReader::open(dir, kind, ReadMode::Mmap).unwrap();
-    r.flip_to_cell(0).unwrap();
+    let layout = Layout::open(dir, kind, ReadMode::Mmap).unwrap();
+    let mut pages = PageReader::uncached();
+    let mut r = layout.cursor();
+    r.flip_to_cell(0, &mut pages).unwrap();
     for (node, want) in &data.cells[0] {
-        assert_eq!(r.vpage(*node).unwrap().as_deref(), Some(&want[..]));
+        assert_eq!(r.vpage(*node, 0.0, &mut pages).unwrap().as_deref(), Some(&want[..]));
     }
 }
 
@@ -223,11 +231,13 @@ fn flip_costs_follow_the_design() {
     write_all(dir.path(), &data, &LayoutOptions::default());
     let stats = data.stats();
     for kind in LayoutKind::ALL {
-        let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).unwrap();
-        let s = r.summary();
+        let layout = Layout::open(dir.path(), kind, ReadMode::Mmap).unwrap();
+        let s = layout.summary();
         assert_eq!(s.visible_nodes_max, stats.visible_max);
+        let mut pages = PageReader::uncached();
+        let mut r = layout.cursor();
         for cell in [3u32, 11, 0, 19] {
-            let cost = r.flip_to_cell(cell).unwrap();
+            let cost = r.flip_to_cell(cell, &mut pages).unwrap();
             let visible = data.cells[cell as usize].len() as u64;
             match kind {
                 LayoutKind::Horizontal => assert_eq!(cost.pages_read, 0),
@@ -237,19 +247,21 @@ fn flip_costs_follow_the_design() {
                     assert_eq!(cost.pages_read, u64::from(visible > 0) * (visible * 10).div_ceil(4092))
                 }
             }
+            // Segments of these cells share no page: with no cache, all is read.
+            assert_eq!(cost.requested, cost.pages_read);
             assert!(cost.pages_read <= u64::from(s.flip_pages_max));
-            assert_eq!(r.flip_to_cell(cell).unwrap().pages_read, 0, "same cell is free");
+            assert_eq!(r.flip_to_cell(cell, &mut pages).unwrap(), Default::default(), "same cell is free");
         }
         // Reading every visible V-page of a cell in dfs order: vertical layouts read each page
         // of the cell's run once; horizontal reads one page per visible node.
-        r.flip_to_cell(5).unwrap();
-        r.reset_io();
+        r.flip_to_cell(5, &mut pages).unwrap();
+        pages.reset_io();
         let visible: Vec<u32> = data.cells[5].iter().map(|(n, _)| *n).collect();
         for &n in &visible {
-            assert!(r.vpage(n).unwrap().is_some());
+            assert!(r.vpage(n, 0.0, &mut pages).unwrap().is_some());
         }
         let vp_file = kind.file_names().last().unwrap();
-        let pages = r.io().file(vp_file);
+        let pages = pages.io().file(vp_file);
         match kind {
             LayoutKind::Horizontal => assert_eq!(pages, visible.len() as u64),
             _ => {
@@ -293,14 +305,16 @@ fn misuse_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     write_all(dir.path(), &data, &LayoutOptions::default());
     for kind in LayoutKind::ALL {
-        let mut r = LayoutReader::open(dir.path(), kind, ReadMode::Mmap).unwrap();
-        assert!(matches!(r.vpage(0), Err(Error::Invalid { .. })), "before any flip");
-        assert!(r.flip_to_cell(3).is_err());
-        r.flip_to_cell(2).unwrap();
-        assert!(r.vpage(5).is_err());
+        let layout = Layout::open(dir.path(), kind, ReadMode::Mmap).unwrap();
+        let mut pages = PageReader::uncached();
+        let mut r = layout.cursor();
+        assert!(matches!(r.vpage(0, 0.0, &mut pages), Err(Error::Invalid { .. })), "before any flip");
+        assert!(r.flip_to_cell(3, &mut pages).is_err());
+        r.flip_to_cell(2, &mut pages).unwrap();
+        assert!(r.vpage(5, 0.0, &mut pages).is_err());
         // Another layout's directory is not this one.
         let other = tempfile::tempdir().unwrap();
-        assert!(matches!(LayoutReader::open(other.path(), kind, ReadMode::Mmap), Err(Error::Io { .. })));
+        assert!(matches!(Layout::open(other.path(), kind, ReadMode::Mmap), Err(Error::Io { .. })));
     }
     let mut bad = data.clone();
     bad.cell_count = 4;

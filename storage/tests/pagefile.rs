@@ -3,7 +3,7 @@
 use std::fs;
 use std::path::Path;
 
-use hdov_storage::{Error, FORMAT_VERSION, PageFile, PageFileWriter, ReadMode};
+use hdov_storage::{Error, FORMAT_VERSION, PageFile, PageFileWriter, PageReader, ReadMode};
 
 const KIND: [u8; 4] = *b"TEST";
 
@@ -30,19 +30,21 @@ fn round_trip_mmap_and_pread() {
         let f = PageFile::open(&path, KIND, mode).unwrap();
         assert_eq!(f.page_count(), 3);
         assert_eq!(f.capacity(), 124);
-        assert_eq!(f.reads(), 0);
+        assert_eq!(f.name(), "p");
+        let mut r = PageReader::uncached();
+        assert_eq!(r.io().file("p"), 0);
         for (i, want) in pages.iter().enumerate() {
-            let got = f.page(i as u64).unwrap();
+            let got = r.page(&f, i as u64, 0.0).unwrap();
             assert_eq!(got.len(), 124);
             assert_eq!(&got[..want.len()], &want[..]);
             assert!(got[want.len()..].iter().all(|&b| b == 0));
         }
-        assert_eq!(f.reads(), 3);
-        f.page(1).unwrap();
-        assert_eq!(f.reads(), 4);
-        f.reset_reads();
-        assert_eq!(f.reads(), 0);
-        assert!(matches!(f.page(3), Err(Error::Invalid { .. })));
+        assert_eq!(r.io().file("p"), 3);
+        r.page(&f, 1, 0.0).unwrap();
+        assert_eq!(r.io().file("p"), 4);
+        r.reset_io();
+        assert_eq!(r.io().file("p"), 0);
+        assert!(matches!(r.page(&f, 3, 0.0), Err(Error::Invalid { .. })));
     }
 }
 
@@ -53,7 +55,7 @@ fn empty_file_opens_with_no_pages() {
     write_sample(&path, 64, &[]);
     let f = PageFile::open(&path, KIND, ReadMode::Mmap).unwrap();
     assert_eq!(f.page_count(), 0);
-    assert!(f.page(0).is_err());
+    assert!(PageReader::uncached().page(&f, 0, 0.0).is_err());
 }
 
 #[test]
@@ -113,12 +115,14 @@ fn flipped_payload_byte_fails_checksum() {
     let (_d, path) = damaged(|b| b[64 * 2 + 10] ^= 0x40);
     for mode in [ReadMode::Mmap, ReadMode::Pread] {
         let f = PageFile::open(&path, KIND, mode).unwrap();
-        assert!(f.page(0).is_ok());
-        match f.page(1) {
+        let mut r = PageReader::uncached();
+        assert!(r.page(&f, 0, 0.0).is_ok());
+        match r.page(&f, 1, 0.0) {
             Err(Error::Checksum { page: 1, .. }) => {}
             other => panic!("expected checksum error, got {other:?}"),
         }
-        assert!(f.page(2).is_ok());
+        assert!(r.page(&f, 2, 0.0).is_ok());
+        assert!(f.verify().is_err());
     }
 }
 

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 
 use hdov_storage::synthetic::{SyntheticSpec, sparse_vdata, synthetic_vdata};
 use hdov_storage::{
-    BlobFile, BlobWriter, DovCodec, Error, LayoutKind, LayoutOptions, LayoutReader, PageFile, ReadMode, write_layout,
+    BlobFile, BlobWriter, DovCodec, Error, Layout, LayoutKind, LayoutOptions, PageFile, PageReader, ReadMode,
+    write_layout,
 };
 
 /// xorshift64*: reproducible test randomness without a dependency.
@@ -74,8 +75,7 @@ fn sample_layouts(dir: &Path, page_size: u32, dov: DovCodec) {
 fn read_layout_fully(dir: &Path, kind: LayoutKind) -> Result<u64, Error> {
     let mut total = 0;
     for mode in [ReadMode::Mmap, ReadMode::Pread] {
-        let mut r = LayoutReader::open(dir, kind, mode)?;
-        total += r.verify()?;
+        total += Layout::open(dir, kind, mode)?.verify()?;
     }
     Ok(total)
 }
@@ -251,7 +251,7 @@ fn targeted_damage_to_each_layout_file() {
         let len = fs::metadata(good.path().join(name)).unwrap().len() as usize;
 
         let d = damaged(good.path(), name, |b| b.truncate(len - 10));
-        let e = LayoutReader::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
+        let e = Layout::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
         assert!(matches!(e, Error::Truncated { .. }), "{name}: {e}");
 
         // A flipped bit in the last page: found when that page is read.
@@ -260,21 +260,21 @@ fn targeted_damage_to_each_layout_file() {
         assert!(matches!(e, Error::Checksum { .. }), "{name}: {e}");
 
         let d = damaged(good.path(), name, |b| b[1] ^= 0x10);
-        let e = LayoutReader::open(d.path(), kind, ReadMode::Pread).unwrap_err();
+        let e = Layout::open(d.path(), kind, ReadMode::Pread).unwrap_err();
         assert!(matches!(e, Error::WrongMagic { .. }), "{name}: {e}");
 
         let d = damaged(good.path(), name, |b| {
             b[8..12].copy_from_slice(b"ZZZZ");
             refresh_page_checksums(b);
         });
-        let e = LayoutReader::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
+        let e = Layout::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
         assert!(matches!(e, Error::WrongKind { .. }), "{name}: {e}");
 
         let d = damaged(good.path(), name, |b| {
             b[12] = 9;
             refresh_page_checksums(b);
         });
-        let e = LayoutReader::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
+        let e = Layout::open(d.path(), kind, ReadMode::Mmap).unwrap_err();
         assert!(matches!(e, Error::WrongVersion { found: 9, .. }), "{name}: {e}");
     }
 }
@@ -287,7 +287,7 @@ fn mismatched_builds_and_bad_metadata_are_corrupt() {
     sample_layouts(b.path(), 4096, DovCodec::F32);
     // vpages.vertical of another build next to this build's index.
     fs::copy(b.path().join("vpages.vertical"), a.path().join("vpages.vertical")).unwrap();
-    let e = LayoutReader::open(a.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
+    let e = Layout::open(a.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
 
     // A metadata layout code that names another layout (checksums made valid).
@@ -295,7 +295,7 @@ fn mismatched_builds_and_bad_metadata_are_corrupt() {
         bytes[4096] = 1;
         refresh_page_checksums(bytes);
     });
-    let e = LayoutReader::open(d.path(), LayoutKind::IndexedVertical, ReadMode::Mmap).unwrap_err();
+    let e = Layout::open(d.path(), LayoutKind::IndexedVertical, ReadMode::Mmap).unwrap_err();
     assert!(e.to_string().contains("layout code"), "{e}");
 
     // A node count that the file cannot hold.
@@ -303,7 +303,7 @@ fn mismatched_builds_and_bad_metadata_are_corrupt() {
         bytes[4096 + 8..4096 + 12].copy_from_slice(&u32::MAX.to_le_bytes());
         refresh_page_checksums(bytes);
     });
-    let e = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
+    let e = Layout::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
 }
 
@@ -352,9 +352,11 @@ fn sparse_vpage_count_or_index_out_of_range_is_corrupt() {
                 edit(b);
                 refresh_page_checksums(b);
             });
-            let mut r = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap();
-            r.flip_to_cell(0).unwrap();
-            let e = r.vpage(0).unwrap_err();
+            let layout = Layout::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap();
+            let mut pages = PageReader::uncached();
+            let mut r = layout.cursor();
+            r.flip_to_cell(0, &mut pages).unwrap();
+            let e = r.vpage(0, 0.0, &mut pages).unwrap_err();
             assert!(matches!(e, Error::Corrupt { .. }), "{fanout}, {what}: {e}");
             assert!(e.to_string().contains("node 0"), "{e}");
             let e = read_layout_fully(d.path(), LayoutKind::Vertical).unwrap_err();
@@ -374,7 +376,7 @@ fn sparse_metadata_must_match_the_fan_outs() {
             b[64 + 3] = v;
             refresh_page_checksums(b);
         });
-        let e = LayoutReader::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
+        let e = Layout::open(d.path(), LayoutKind::Vertical, ReadMode::Mmap).unwrap_err();
         assert!(matches!(e, Error::Corrupt { .. }) && e.to_string().contains(msg), "{e}");
     }
     // Horizontal never has sparse V-pages.
@@ -385,7 +387,7 @@ fn sparse_metadata_must_match_the_fan_outs() {
     b[64 + 3] = 1;
     refresh_page_checksums(&mut b);
     fs::write(&path, b).unwrap();
-    let e = LayoutReader::open(h.path(), LayoutKind::Horizontal, ReadMode::Mmap).unwrap_err();
+    let e = Layout::open(h.path(), LayoutKind::Horizontal, ReadMode::Mmap).unwrap_err();
     assert!(matches!(e, Error::Corrupt { .. }) && e.to_string().contains("V-page encoding 1"), "{e}");
 }
 

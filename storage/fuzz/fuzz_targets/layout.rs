@@ -4,7 +4,7 @@
 #![no_main]
 
 use hdov_storage::pagefile::reseal_checksums as refresh_checksums;
-use hdov_storage::{LayoutKind, LayoutReader, ReadMode};
+use hdov_storage::{Layout, LayoutKind, ReadMode};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
@@ -25,8 +25,8 @@ fuzz_target!(|data: &[u8]| {
         std::fs::write(dir.path().join(name), bytes).unwrap();
     }
     for mode in [ReadMode::Mmap, ReadMode::Pread] {
-        if let Ok(mut r) = LayoutReader::open(dir.path(), kind, mode) {
-            let _ = r.verify();
+        if let Ok(layout) = Layout::open(dir.path(), kind, mode) {
+            let _ = layout.verify();
         }
     }
 });

@@ -1,4 +1,5 @@
-//! The page cache: the one seam through which the query engine reads tree pages and V-pages.
+//! The page cache behind every [`PageReader`](crate::PageReader), the one seam through which
+//! the query engine reads tree pages and V-pages.
 //!
 //! A [`PageCache`] keeps page bytes keyed by [`PageKey`] (a caller-chosen file id and a page
 //! number), bounded by a page count and a byte count ([`CacheLimits`]), and asks a
@@ -37,11 +38,11 @@ pub use dov_time::{DEFAULT_KAPPA, DovTime};
 pub use lru::Lru;
 pub use none::NoCache;
 
-/// Which page: a file id chosen by the caller (e.g. 0 for the tree file, 1 for V-pages) and a
-/// page number in that file.
+/// Which page: a file's number (a [`PageReader`](crate::PageReader) uses
+/// [`PageFile::id`](crate::PageFile::id)) and a page number in that file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct PageKey {
-    /// The caller's number for the file.
+    /// The file's number (its `PageFile::id`, behind a `PageReader`).
     pub file: u32,
     /// The page's number in the file.
     pub page: u64,

@@ -77,12 +77,13 @@ fn slots(size: u64, cap: u64) -> SlotArray {
     SlotArray { first: 0, size, cap }
 }
 
-pub(crate) struct Reader {
+/// Where each node's run of V-pages starts (computed at open; immutable).
+pub(crate) struct Runs {
     /// First page of each node's run of V-pages.
     first: Vec<u64>,
 }
 
-impl Reader {
+impl Runs {
     pub fn new(meta: &Meta, file: &PagedFile) -> Result<Self> {
         let cap = file.file.capacity() as u64;
         let mut first = Vec::with_capacity(meta.fanout.len());

@@ -9,9 +9,10 @@
 
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, record_pages};
 use super::vertical::{CellVPages, write_cell_vpages};
-use super::{LayoutKind, LayoutSize, Meta, WriteCtx, layout_size};
+use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY, WriteCtx, layout_size};
 use crate::error::Result;
 use crate::le::u32_at;
+use crate::page_reader::PageReader;
 use crate::pagefile::PageFileWriter;
 
 pub(crate) const INDEX_FILE: &str = "vindex.indexed-vertical";
@@ -80,27 +81,37 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     ))
 }
 
-pub(crate) struct Reader {
-    /// The selected cell's visible nodes (ascending) and their V-page addresses.
+/// Checks what the cursors rely on: one directory entry per cell.
+pub(crate) fn check(meta: &Meta, index: &PagedFile) -> Result<()> {
+    if meta.directory.len() != meta.cell_count as usize {
+        return Err(index.corrupt("directory length differs from the cell count"));
+    }
+    Ok(())
+}
+
+/// A cursor's selected segment: the cell's visible nodes (ascending) and their V-page
+/// addresses.
+#[derive(Default)]
+pub(crate) struct Segment {
     seg: Vec<(u32, Addr)>,
 }
 
-impl Reader {
-    pub fn new(meta: &Meta, index: &PagedFile) -> Result<Self> {
-        if meta.directory.len() != meta.cell_count as usize {
-            return Err(index.corrupt("directory length differs from the cell count"));
-        }
-        Ok(Self { seg: Vec::new() })
-    }
-
-    pub fn flip(&mut self, meta: &Meta, index: &mut PagedFile, cell: u32, bytes: &mut Vec<u8>) -> Result<()> {
+impl Segment {
+    pub fn flip(
+        &mut self,
+        meta: &Meta,
+        index: &PagedFile,
+        pages: &mut PageReader,
+        cell: u32,
+        bytes: &mut Vec<u8>,
+    ) -> Result<()> {
+        self.seg.clear();
         let (addr, count) = meta.directory[cell as usize];
         let len = (count as usize)
             .checked_mul(PAIR_BYTES)
             .filter(|&l| (l as u64) <= index.file.file_len())
             .ok_or_else(|| index.corrupt(format!("cell {cell}: {count} visible nodes cannot fit")))?;
-        index.read_record(addr, len, bytes)?;
-        self.seg.clear();
+        index.read_record(pages, SEGMENT_PRIORITY, addr, len, bytes)?;
         let mut prev: Option<u32> = None;
         for pair in bytes.chunks_exact(PAIR_BYTES) {
             let node = u32_at(pair, 0).unwrap_or(u32::MAX);

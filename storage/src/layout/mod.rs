@@ -1,4 +1,5 @@
-//! The three V-page layouts of thesis §5.4 and a reader that counts the pages it reads.
+//! The three V-page layouts of thesis §5.4: a [`Layout`] (opened once, shared by threads) and
+//! its [`LayoutCursor`]s (one per query), which read pages through a [`PageReader`].
 //!
 //! | layout | files | cell flip reads | V-page read |
 //! |---|---|---|---|
@@ -21,8 +22,8 @@ use std::path::Path;
 use std::str::FromStr;
 
 use crate::error::{Error, Result};
-use crate::io_stats::{FileIo, IoStats};
 use crate::le::{u32_at, u64_at};
+use crate::page_reader::PageReader;
 use crate::pagefile::{MIN_PAGE_SIZE, PageFile, ReadMode};
 use crate::vpage::{DovCodec, SparseCodec, VData, VDataStats, VEntry, VPageCodec};
 use packing::{Addr, PagedFile, record_pages};
@@ -120,10 +121,14 @@ impl LayoutSize {
     }
 }
 
-/// What changing cell cost.
+/// What changing cell cost, in pages of the layout's index file as the [`PageReader`] counted
+/// them (horizontal: always zero).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct FlipCost {
+    /// Pages read from the file: those neither the read buffer nor the cache held.
     pub pages_read: u64,
+    /// Pages of the segment requested (the thesis's flip cost, whatever answered them).
+    pub requested: u64,
 }
 
 /// Counts describing a written layout, from its metadata (no I/O).
@@ -250,13 +255,13 @@ impl Meta {
     }
 
     /// Reads and checks the metadata record at the start of `file`.
-    pub fn read(file: &mut PagedFile, kind: LayoutKind) -> Result<Meta> {
+    pub fn read(file: &PagedFile, kind: LayoutKind, pages: &mut PageReader) -> Result<Meta> {
         let cap = file.file.capacity() as u64;
         let mut fixed = Vec::new();
         if file.file.page_count() == 0 {
             return Err(Error::truncated(file.path(), "no metadata page"));
         }
-        file.read_record(Addr { page: 0, offset: 0 }, META_FIXED, &mut fixed)?;
+        file.read_record(pages, 0.0, Addr { page: 0, offset: 0 }, META_FIXED, &mut fixed)?;
         let bad = |r: String| Error::corrupt(file.path(), format!("layout metadata: {r}"));
         if fixed[0] != kind.code() {
             return Err(bad(format!("layout code {}, expected {} ({kind})", fixed[0], kind.code())));
@@ -292,7 +297,7 @@ impl Meta {
             )));
         }
         let mut b = Vec::new();
-        file.read_record(Addr { page: 0, offset: 0 }, len as usize, &mut b)?;
+        file.read_record(pages, 0.0, Addr { page: 0, offset: 0 }, len as usize, &mut b)?;
         let fanout: Vec<u16> = b[META_FIXED..META_FIXED + 2 * node_count as usize]
             .chunks_exact(2)
             .map(|c| u16::from_le_bytes([c[0], c[1]]))
@@ -338,64 +343,67 @@ impl Meta {
     }
 }
 
-/// Kind-specific reader state.
-enum State {
-    Horizontal(horizontal::Reader),
-    Vertical(vertical::Reader),
-    Indexed(indexed::Reader),
+/// The priority index segments are read with: they are needed once per flip, their cell's
+/// pointers then stay in the cursor, so they rank lowest in a DoV cache ("0 when unknown").
+pub(crate) const SEGMENT_PRIORITY: f64 = 0.0;
+
+/// Kind-specific layout state, immutable after open.
+enum Shape {
+    Horizontal(horizontal::Runs),
+    Vertical(vertical::Segments),
+    Indexed,
 }
 
-/// Reads one layout: select a cell with [`flip_to_cell`](Self::flip_to_cell), then fetch
-/// V-pages by node dfs number. Counts pages read per file.
-pub struct LayoutReader {
+/// One open layout: its metadata and page files, immutable after open, so `Send + Sync` and
+/// opened once per database. Reading is done by [`LayoutCursor`]s ([`cursor`](Self::cursor)),
+/// one per query or session, each through the caller's [`PageReader`].
+pub struct Layout {
     meta: Meta,
     /// The index file (vertical, indexed-vertical); `None` for horizontal.
     index: Option<PagedFile>,
     vpages: PagedFile,
-    state: State,
-    cell: Option<u32>,
-    bytes: Vec<u8>,
+    shape: Shape,
 }
 
-impl fmt::Debug for LayoutReader {
+impl fmt::Debug for Layout {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("LayoutReader")
+        f.debug_struct("Layout")
             .field("kind", &self.meta.kind)
             .field("cells", &self.meta.cell_count)
             .field("nodes", &self.meta.node_count)
-            .field("cell", &self.cell)
             .finish()
     }
 }
 
 fn open_paged(dir: &Path, name: &str, tag: [u8; 4], mode: ReadMode) -> Result<PagedFile> {
-    Ok(PagedFile::new(PageFile::open(&dir.join(name), tag, mode)?, name))
+    Ok(PagedFile::new(PageFile::open(&dir.join(name), tag, mode)?))
 }
 
-impl LayoutReader {
-    /// Opens the `kind` layout in `dir` and reads its metadata. Page counts start at zero
-    /// after open: the metadata read is not counted.
-    pub fn open(dir: &Path, kind: LayoutKind, mode: ReadMode) -> Result<Self> {
-        let (meta, index, vpages, state) = match kind {
+impl Layout {
+    /// Opens the `kind` layout in `dir` and reads its metadata (through a reader of its own:
+    /// no caller's page count includes it), checking it against the files.
+    pub fn open(dir: &Path, kind: LayoutKind, mode: ReadMode) -> Result<Layout> {
+        let mut pages = PageReader::uncached();
+        let (meta, index, vpages, shape) = match kind {
             LayoutKind::Horizontal => {
-                let mut vp = open_paged(dir, horizontal::VPAGES_FILE, horizontal::TAG, mode)?;
-                let meta = Meta::read(&mut vp, kind)?;
-                let st = horizontal::Reader::new(&meta, &vp)?;
-                (meta, None, vp, State::Horizontal(st))
+                let vp = open_paged(dir, horizontal::VPAGES_FILE, horizontal::TAG, mode)?;
+                let meta = Meta::read(&vp, kind, &mut pages)?;
+                let runs = horizontal::Runs::new(&meta, &vp)?;
+                (meta, None, vp, Shape::Horizontal(runs))
             }
             LayoutKind::Vertical => {
-                let mut ix = open_paged(dir, vertical::INDEX_FILE, vertical::INDEX_TAG, mode)?;
+                let ix = open_paged(dir, vertical::INDEX_FILE, vertical::INDEX_TAG, mode)?;
                 let vp = open_paged(dir, vertical::VPAGES_FILE, vertical::VPAGES_TAG, mode)?;
-                let meta = Meta::read(&mut ix, kind)?;
-                let st = vertical::Reader::new(&meta, &ix)?;
-                (meta, Some(ix), vp, State::Vertical(st))
+                let meta = Meta::read(&ix, kind, &mut pages)?;
+                let segments = vertical::Segments::new(&meta, &ix)?;
+                (meta, Some(ix), vp, Shape::Vertical(segments))
             }
             LayoutKind::IndexedVertical => {
-                let mut ix = open_paged(dir, indexed::INDEX_FILE, indexed::INDEX_TAG, mode)?;
+                let ix = open_paged(dir, indexed::INDEX_FILE, indexed::INDEX_TAG, mode)?;
                 let vp = open_paged(dir, indexed::VPAGES_FILE, indexed::VPAGES_TAG, mode)?;
-                let meta = Meta::read(&mut ix, kind)?;
-                let st = indexed::Reader::new(&meta, &ix)?;
-                (meta, Some(ix), vp, State::Indexed(st))
+                let meta = Meta::read(&ix, kind, &mut pages)?;
+                indexed::check(&meta, &ix)?;
+                (meta, Some(ix), vp, Shape::Indexed)
             }
         };
         if vpages.file.page_count() != meta.vpages_pages {
@@ -405,9 +413,7 @@ impl LayoutReader {
                 meta.vpages_pages
             )));
         }
-        let mut r = Self { meta, index, vpages, state, cell: None, bytes: Vec::new() };
-        r.reset_io();
-        Ok(r)
+        Ok(Layout { meta, index, vpages, shape })
     }
 
     pub fn kind(&self) -> LayoutKind {
@@ -426,9 +432,19 @@ impl LayoutReader {
     pub fn codec(&self) -> VPageCodec {
         self.meta.codec
     }
-    /// The selected cell, if any.
-    pub fn cell(&self) -> Option<u32> {
-        self.cell
+
+    /// The file holding the V-pages.
+    pub fn vpage_file(&self) -> &PageFile {
+        &self.vpages.file
+    }
+    /// The file holding the cells' segments (vertical, indexed-vertical); `None` for
+    /// horizontal.
+    pub fn index_file(&self) -> Option<&PageFile> {
+        self.index.as_ref().map(|i| &i.file)
+    }
+    /// The layout's files, index (if any) first: as [`LayoutKind::file_names`] names them.
+    pub fn files(&self) -> impl Iterator<Item = &PageFile> {
+        self.index_file().into_iter().chain([self.vpage_file()])
     }
 
     /// Counts from the metadata; no I/O.
@@ -436,7 +452,7 @@ impl LayoutReader {
         let m = &self.meta;
         let cells = f64::from(m.cell_count.max(1));
         let page_size = self.vpages.file.page_size();
-        let bytes = self.vpages.file.file_len() + self.index.as_ref().map_or(0, |i| i.file.file_len());
+        let bytes = self.files().map(PageFile::file_len).sum();
         LayoutSummary {
             kind: m.kind,
             dov: m.codec.dov,
@@ -451,86 +467,20 @@ impl LayoutReader {
         }
     }
 
-    /// Selects `cell`: reads its index segment (vertical: N_node pointers; indexed-vertical:
-    /// its visible nodes' pairs; horizontal: nothing). Selecting the current cell again is free.
-    pub fn flip_to_cell(&mut self, cell: u32) -> Result<FlipCost> {
-        if cell >= self.meta.cell_count {
-            return Err(Error::invalid(
-                self.vpages.path(),
-                format!("cell {cell} out of range ({} cells)", self.meta.cell_count),
-            ));
-        }
-        if self.cell == Some(cell) {
-            return Ok(FlipCost::default());
-        }
-        self.cell = None;
-        let before = self.pages_read();
-        match &mut self.state {
-            State::Horizontal(_) => {}
-            State::Vertical(st) => {
-                let ix = self.index.as_mut().expect("vertical has an index file");
-                st.flip(&self.meta, ix, cell, &mut self.bytes)?;
-            }
-            State::Indexed(st) => {
-                let ix = self.index.as_mut().expect("indexed-vertical has an index file");
-                st.flip(&self.meta, ix, cell, &mut self.bytes)?;
-            }
-        }
-        self.cell = Some(cell);
-        Ok(FlipCost { pages_read: self.pages_read() - before })
-    }
-
-    /// The V-page of `node` in the selected cell; `None` if the node is invisible there.
-    pub fn vpage(&mut self, node: u32) -> Result<Option<Vec<VEntry>>> {
-        let mut out = Vec::new();
-        Ok(self.vpage_into(node, &mut out)?.then_some(out))
-    }
-
-    /// Like [`vpage`](Self::vpage) into a reused buffer; returns whether the node is visible
-    /// (when not, `out` is left empty).
-    pub fn vpage_into(&mut self, node: u32, out: &mut Vec<VEntry>) -> Result<bool> {
-        out.clear();
-        let Some(cell) = self.cell else {
-            return Err(Error::invalid(self.vpages.path(), "no cell selected: call flip_to_cell first"));
+    /// A cursor with no cell selected. Cheap: no I/O.
+    pub fn cursor(&self) -> LayoutCursor<'_> {
+        let segment = match self.shape {
+            Shape::Horizontal(_) => Segment::Horizontal,
+            Shape::Vertical(_) => Segment::Vertical(vertical::Segment::default()),
+            Shape::Indexed => Segment::Indexed(indexed::Segment::default()),
         };
-        let Some(&fanout) = self.meta.fanout.get(node as usize) else {
-            return Err(Error::invalid(
-                self.vpages.path(),
-                format!("node {node} out of range ({} nodes)", self.meta.node_count),
-            ));
-        };
-        let len = self.meta.codec.vpage_bytes(fanout);
-        let addr = match &self.state {
-            State::Horizontal(st) => st.locate(node, cell, len, &self.vpages)?,
-            State::Vertical(st) => st.locate(node),
-            State::Indexed(st) => st.locate(node),
-        };
-        let Some(addr) = addr else {
-            return Ok(false);
-        };
-        if let Some(sp) = self.meta.sparse {
-            // Header first (its page is then held, so the record read costs no more pages).
-            let codec = self.meta.codec;
-            let bad = |f: &PagedFile, r: String| f.corrupt(format!("cell {cell}, node {node}: {r}"));
-            self.vpages.read_record(addr, sp.header_len(), &mut self.bytes)?;
-            let len = sp.record_len(&codec, fanout, &self.bytes).map_err(|r| bad(&self.vpages, r))?;
-            self.vpages.read_record(addr, len, &mut self.bytes)?;
-            sp.decode(&codec, fanout, &self.bytes, out).map_err(|r| bad(&self.vpages, r))?;
-            return Ok(true);
-        }
-        self.vpages.read_record(addr, len, &mut self.bytes)?;
-        if matches!(self.state, State::Horizontal(_)) && self.bytes.iter().all(|&b| b == 0) {
-            // Horizontal stores hidden nodes as zero V-pages.
-            return Ok(false);
-        }
-        self.meta.codec.decode(&self.bytes, out);
-        Ok(true)
+        LayoutCursor { layout: self, cell: None, segment, bytes: Vec::new() }
     }
 
     /// Reads every cell's index and every visible V-page, checking all checksums and
-    /// pointers (an fsck). Returns the number of visible V-pages. Leaves no cell selected and
-    /// the page counts at zero. Its work is bounded by the files' size.
-    pub fn verify(&mut self) -> Result<u64> {
+    /// pointers (an fsck), through a cursor and an uncached [`PageReader`] of its own. Returns
+    /// the number of visible V-pages. Its work is bounded by the files' size.
+    pub fn verify(&self) -> Result<u64> {
         let nodes: Vec<u32> = (0..self.meta.node_count).filter(|&n| self.meta.fanout[n as usize] > 0).collect();
         // Without nodes a vertical segment is empty, and a horizontal flip reads nothing: the
         // cell count is then unbounded by the file and there is nothing to read.
@@ -539,55 +489,161 @@ impl LayoutReader {
             LayoutKind::Vertical => self.meta.node_count > 0,
             LayoutKind::IndexedVertical => true,
         };
+        if !cells_matter {
+            return Ok(0);
+        }
+        let mut pages = PageReader::uncached();
+        let mut cursor = self.cursor();
         let mut visible = 0u64;
         let mut buf = Vec::new();
-        let result = (|| {
-            if !cells_matter {
-                return Ok(());
+        for cell in 0..self.meta.cell_count {
+            cursor.flip_to_cell(cell, &mut pages)?;
+            // Vertical layouts: only the nodes the segment points at (O(N_vnode) per cell).
+            let candidates = cursor.visible_nodes().unwrap_or_else(|| nodes.clone());
+            for n in candidates {
+                visible += u64::from(cursor.vpage_into(n, 0.0, &mut pages, &mut buf)?);
             }
-            let mut candidates = Vec::new();
-            for cell in 0..self.meta.cell_count {
-                self.flip_to_cell(cell)?;
-                // Vertical layouts: only the nodes the segment points at (O(N_vnode) per cell).
-                candidates.clear();
-                match &self.state {
-                    State::Horizontal(_) => candidates.extend_from_slice(&nodes),
-                    State::Vertical(st) => candidates.extend(st.pointed_nodes()),
-                    State::Indexed(st) => candidates.extend(st.pointed_nodes()),
-                }
-                for &n in &candidates {
-                    visible += u64::from(self.vpage_into(n, &mut buf)?);
-                }
-            }
-            Ok(())
-        })();
+        }
+        Ok(visible)
+    }
+}
+
+/// A cursor's selected segment.
+enum Segment {
+    Horizontal,
+    Vertical(vertical::Segment),
+    Indexed(indexed::Segment),
+}
+
+/// Reads one [`Layout`] for one query or session: select a cell with
+/// [`flip_to_cell`](Self::flip_to_cell), then fetch V-pages by node dfs number. It holds the
+/// selected cell's index segment; the pages come through the caller's [`PageReader`], which
+/// counts them. Any number of cursors of one layout may run at once, on any threads.
+pub struct LayoutCursor<'a> {
+    layout: &'a Layout,
+    cell: Option<u32>,
+    segment: Segment,
+    bytes: Vec<u8>,
+}
+
+impl fmt::Debug for LayoutCursor<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("LayoutCursor").field("layout", self.layout).field("cell", &self.cell).finish()
+    }
+}
+
+impl<'a> LayoutCursor<'a> {
+    /// The layout this cursor reads.
+    pub fn layout(&self) -> &'a Layout {
+        self.layout
+    }
+
+    /// The selected cell, if any.
+    pub fn cell(&self) -> Option<u32> {
+        self.cell
+    }
+
+    /// Selects `cell`: reads its index segment through `pages` (vertical: N_node pointers;
+    /// indexed-vertical: its visible nodes' pairs; horizontal: nothing). Selecting the current
+    /// cell again is free. The cost counts the index file's pages as `pages` counts them:
+    /// requested, and read (not answered by the read buffer or the cache).
+    pub fn flip_to_cell(&mut self, cell: u32, pages: &mut PageReader) -> Result<FlipCost> {
+        let l = self.layout;
+        if cell >= l.meta.cell_count {
+            return Err(Error::invalid(
+                l.vpages.path(),
+                format!("cell {cell} out of range ({} cells)", l.meta.cell_count),
+            ));
+        }
+        if self.cell == Some(cell) {
+            return Ok(FlipCost::default());
+        }
         self.cell = None;
-        self.reset_io();
-        result.map(|()| visible)
-    }
-
-    fn pages_read(&self) -> u64 {
-        self.vpages.reads() + self.index.as_ref().map_or(0, PagedFile::reads)
-    }
-
-    /// Pages read per file since open or the last [`reset_io`](Self::reset_io). A record read
-    /// that lands on the page read just before from the same file costs nothing (the reader
-    /// holds that page).
-    pub fn io(&self) -> IoStats {
-        let mut files = Vec::new();
-        if let Some(ix) = &self.index {
-            files.push(FileIo { file: ix.name().to_string(), pages_read: ix.reads() });
+        let Some(ix) = &l.index else {
+            self.cell = Some(cell);
+            return Ok(FlipCost::default());
+        };
+        let before = pages.file_io(&ix.file);
+        match (&mut self.segment, &l.shape) {
+            (Segment::Vertical(seg), Shape::Vertical(segments)) => {
+                seg.flip(segments, &l.meta, ix, pages, cell, &mut self.bytes)?;
+            }
+            (Segment::Indexed(seg), Shape::Indexed) => seg.flip(&l.meta, ix, pages, cell, &mut self.bytes)?,
+            _ => unreachable!("a cursor's segment matches its layout's shape"),
         }
-        files.push(FileIo { file: self.vpages.name().to_string(), pages_read: self.vpages.reads() });
-        IoStats { files }
+        self.cell = Some(cell);
+        let after = pages.file_io(&ix.file);
+        Ok(FlipCost { pages_read: after.pages_read - before.pages_read, requested: after.requested - before.requested })
     }
 
-    /// Zeroes the page counts and drops the held pages (the next read starts cold).
-    pub fn reset_io(&mut self) {
-        self.vpages.reset_reads();
-        if let Some(ix) = &mut self.index {
-            ix.reset_reads();
+    /// The nodes the selected cell's index segment points at, ascending (vertical,
+    /// indexed-vertical; no I/O): those with a stored V-page there. `None` for horizontal
+    /// (which learns visibility only by reading) and when no cell is selected.
+    pub fn visible_nodes(&self) -> Option<Vec<u32>> {
+        self.cell?;
+        match &self.segment {
+            Segment::Horizontal => None,
+            Segment::Vertical(seg) => Some(seg.pointed_nodes().collect()),
+            Segment::Indexed(seg) => Some(seg.pointed_nodes().collect()),
         }
+    }
+
+    /// The V-page of `node` in the selected cell; `None` if the node is invisible there.
+    /// `priority` is the cache policy's number for its page (the node's DoV; 0 when unknown).
+    pub fn vpage(&mut self, node: u32, priority: f64, pages: &mut PageReader) -> Result<Option<Vec<VEntry>>> {
+        let mut out = Vec::new();
+        Ok(self.vpage_into(node, priority, pages, &mut out)?.then_some(out))
+    }
+
+    /// Like [`vpage`](Self::vpage) into a reused buffer; returns whether the node is visible
+    /// (when not, `out` is left empty).
+    pub fn vpage_into(
+        &mut self,
+        node: u32,
+        priority: f64,
+        pages: &mut PageReader,
+        out: &mut Vec<VEntry>,
+    ) -> Result<bool> {
+        out.clear();
+        let l = self.layout;
+        let Some(cell) = self.cell else {
+            return Err(Error::invalid(l.vpages.path(), "no cell selected: call flip_to_cell first"));
+        };
+        let Some(&fanout) = l.meta.fanout.get(node as usize) else {
+            return Err(Error::invalid(
+                l.vpages.path(),
+                format!("node {node} out of range ({} nodes)", l.meta.node_count),
+            ));
+        };
+        let len = l.meta.codec.vpage_bytes(fanout);
+        let addr = match (&self.segment, &l.shape) {
+            (Segment::Horizontal, Shape::Horizontal(runs)) => runs.locate(node, cell, len, &l.vpages)?,
+            (Segment::Vertical(seg), _) => seg.locate(node),
+            (Segment::Indexed(seg), _) => seg.locate(node),
+            _ => unreachable!("a cursor's segment matches its layout's shape"),
+        };
+        let Some(addr) = addr else {
+            return Ok(false);
+        };
+        let vp = &l.vpages;
+        if let Some(sp) = l.meta.sparse {
+            // Header first (its page then fills the read buffer, so the record read costs no
+            // more pages).
+            let codec = l.meta.codec;
+            let bad = |r: String| vp.corrupt(format!("cell {cell}, node {node}: {r}"));
+            vp.read_record(pages, priority, addr, sp.header_len(), &mut self.bytes)?;
+            let len = sp.record_len(&codec, fanout, &self.bytes).map_err(bad)?;
+            vp.read_record(pages, priority, addr, len, &mut self.bytes)?;
+            sp.decode(&codec, fanout, &self.bytes, out).map_err(bad)?;
+            return Ok(true);
+        }
+        vp.read_record(pages, priority, addr, len, &mut self.bytes)?;
+        if matches!(self.segment, Segment::Horizontal) && self.bytes.iter().all(|&b| b == 0) {
+            // Horizontal stores hidden nodes as zero V-pages.
+            return Ok(false);
+        }
+        l.meta.codec.decode(&self.bytes, out);
+        Ok(true)
     }
 }
 

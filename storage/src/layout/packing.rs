@@ -6,9 +6,11 @@
 //! 1 for a small record, ⌈len / capacity⌉ for a large one, 0 for an empty one.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::le::{u16_at, u32_at};
+use crate::page_reader::PageReader;
 use crate::pagefile::{PageFile, PageFileWriter};
 
 /// A record's place: page number and byte offset in that page's payload.
@@ -164,22 +166,16 @@ impl Packer {
     }
 }
 
-/// A page file plus the last page read from it: a record read that lands on the page just
-/// read costs no new page read (the reader holds one page, as a disk reader holds one block).
+/// A page file of a layout, with the record reader of the packing rule. It holds no page:
+/// pages come through the caller's [`PageReader`], whose read buffer makes a record read that
+/// lands on the page just read from the same file cost no new read.
 pub(crate) struct PagedFile {
     pub file: PageFile,
-    name: String,
-    last: Option<u64>,
-    page: Vec<u8>,
 }
 
 impl PagedFile {
-    pub fn new(file: PageFile, name: &str) -> Self {
-        Self { file, name: name.to_string(), last: None, page: Vec::new() }
-    }
-
-    pub fn name(&self) -> &str {
-        &self.name
+    pub fn new(file: PageFile) -> Self {
+        Self { file }
     }
 
     pub fn path(&self) -> &Path {
@@ -190,22 +186,23 @@ impl PagedFile {
         Error::corrupt(self.file.path(), reason)
     }
 
-    fn load(&mut self, n: u64) -> Result<&[u8]> {
-        if self.last != Some(n) {
-            self.last = None;
-            if n >= self.file.page_count() {
-                return Err(self.corrupt(format!("pointer to page {n}, file has {} pages", self.file.page_count())));
-            }
-            let p = self.file.page(n)?;
-            self.page.clear();
-            self.page.extend_from_slice(&p);
-            self.last = Some(n);
+    fn load(&self, pages: &mut PageReader, n: u64, priority: f64) -> Result<Arc<[u8]>> {
+        if n >= self.file.page_count() {
+            return Err(self.corrupt(format!("pointer to page {n}, file has {} pages", self.file.page_count())));
         }
-        Ok(&self.page)
+        pages.page(&self.file, n, priority)
     }
 
-    /// Reads the `len`-byte record at `addr` into `out` (cleared first).
-    pub fn read_record(&mut self, addr: Addr, len: usize, out: &mut Vec<u8>) -> Result<()> {
+    /// Reads the `len`-byte record at `addr` into `out` (cleared first), its pages through
+    /// `pages` with `priority`.
+    pub fn read_record(
+        &self,
+        pages: &mut PageReader,
+        priority: f64,
+        addr: Addr,
+        len: usize,
+        out: &mut Vec<u8>,
+    ) -> Result<()> {
         out.clear();
         if len == 0 {
             return Ok(());
@@ -219,33 +216,23 @@ impl PagedFile {
                     self.corrupt(format!("record of {len} bytes at page {page} offset {offset} crosses the page end"))
                 );
             }
-            let p = self.load(page)?;
+            let p = self.load(pages, page, priority)?;
             out.extend_from_slice(&p[offset..offset + len]);
             return Ok(());
         }
         if offset != 0 {
             return Err(self.corrupt(format!("multi-page record at page {page} starts at offset {offset}, not 0")));
         }
-        let pages = len.div_ceil(cap) as u64;
-        if page.checked_add(pages).is_none_or(|end| end > self.file.page_count()) {
+        let count = len.div_ceil(cap) as u64;
+        if page.checked_add(count).is_none_or(|end| end > self.file.page_count()) {
             return Err(self.corrupt(format!("record of {len} bytes at page {page} runs past the file's end")));
         }
         out.reserve(len);
-        for i in 0..pages {
+        for i in 0..count {
             let want = (len - out.len()).min(cap);
-            let p = self.load(page + i)?;
+            let p = self.load(pages, page + i, priority)?;
             out.extend_from_slice(&p[..want]);
         }
         Ok(())
-    }
-
-    pub fn reads(&self) -> u64 {
-        self.file.reads()
-    }
-
-    pub fn reset_reads(&mut self) {
-        self.file.reset_reads();
-        // Forget the held page too, so a reset starts from a cold reader.
-        self.last = None;
     }
 }

@@ -11,8 +11,9 @@
 use std::path::Path;
 
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, SlotArray, record_pages};
-use super::{LayoutKind, LayoutSize, Meta, WriteCtx, layout_size};
+use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY, WriteCtx, layout_size};
 use crate::error::Result;
+use crate::page_reader::PageReader;
 use crate::pagefile::PageFileWriter;
 use crate::vpage::is_zero_page;
 
@@ -100,20 +101,19 @@ pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
     ))
 }
 
-pub(crate) struct Reader {
-    segments: SlotArray,
-    /// The selected cell's pointers, one per node.
-    seg: Vec<Addr>,
+/// Where the cells' segments lie (immutable, shared by all cursors).
+pub(crate) struct Segments {
+    slots: SlotArray,
 }
 
-impl Reader {
+impl Segments {
     pub fn new(meta: &Meta, index: &PagedFile) -> Result<Self> {
-        let segments = SlotArray {
+        let slots = SlotArray {
             first: meta.data_start,
             size: (ADDR_BYTES as u64) * u64::from(meta.node_count),
             cap: index.file.capacity() as u64,
         };
-        let end = segments.pages(u64::from(meta.cell_count)).and_then(|n| n.checked_add(meta.data_start));
+        let end = slots.pages(u64::from(meta.cell_count)).and_then(|n| n.checked_add(meta.data_start));
         if end != Some(index.file.page_count()) {
             return Err(index.corrupt(format!(
                 "{} segments of {} nodes do not fill the file's {} pages",
@@ -122,17 +122,33 @@ impl Reader {
                 index.file.page_count()
             )));
         }
-        Ok(Self { segments, seg: Vec::new() })
+        Ok(Self { slots })
     }
+}
 
-    pub fn flip(&mut self, meta: &Meta, index: &mut PagedFile, cell: u32, bytes: &mut Vec<u8>) -> Result<()> {
-        let (page, offset) = self.segments.addr(u64::from(cell));
+/// A cursor's selected segment: one pointer per node.
+#[derive(Default)]
+pub(crate) struct Segment {
+    seg: Vec<Addr>,
+}
+
+impl Segment {
+    pub fn flip(
+        &mut self,
+        segments: &Segments,
+        meta: &Meta,
+        index: &PagedFile,
+        pages: &mut PageReader,
+        cell: u32,
+        bytes: &mut Vec<u8>,
+    ) -> Result<()> {
+        self.seg.clear();
+        let (page, offset) = segments.slots.addr(u64::from(cell));
         let addr = Addr {
             page: u32::try_from(page).map_err(|_| index.corrupt("page number beyond 2^32"))?,
             offset: offset as u16,
         };
-        index.read_record(addr, self.segments.size as usize, bytes)?;
-        self.seg.clear();
+        index.read_record(pages, SEGMENT_PRIORITY, addr, segments.slots.size as usize, bytes)?;
         self.seg.extend(bytes.chunks_exact(ADDR_BYTES).map(|c| Addr::decode(c, 0).unwrap_or(Addr::NIL)));
         debug_assert_eq!(self.seg.len(), meta.node_count as usize);
         Ok(())
