@@ -25,7 +25,7 @@ use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 use hdov::{BuildParams, Database, Info, VisibilityParams};
 use hdov_storage::blob::{BLOB_HEADER_LEN, RECORD_HEADER_LEN};
 use hdov_storage::pagefile::reseal_checksums as reseal_page_checksums;
-use hdov_storage::{LayoutKind, ReadMode, VEntry};
+use hdov_storage::{LayoutKind, PageReader, ReadMode, VEntry};
 use serde_json::{Value, json};
 
 const TREE: &str = "tree.pages";
@@ -124,13 +124,14 @@ fn read_all(dir: &Path, mode: ReadMode) -> hdov::Result<Answers> {
     let info = db.info()?;
     let mut layouts = Vec::new();
     for kind in db.layouts() {
-        let mut r = db.layout(kind, mode)?;
-        let visible = r.verify()?;
+        let layout = db.layout(kind)?;
+        let visible = layout.verify()?;
+        let (mut cursor, mut pages) = (layout.cursor(), PageReader::uncached());
         let mut vpages = Vec::new();
-        for cell in 0..r.cell_count() {
-            r.flip_to_cell(cell)?;
-            for node in 0..r.node_count() {
-                vpages.push(r.vpage(node)?);
+        for cell in 0..layout.cell_count() {
+            cursor.flip_to_cell(cell, &mut pages)?;
+            for node in 0..layout.node_count() {
+                vpages.push(cursor.vpage(node, 0.0, &mut pages)?);
             }
         }
         layouts.push(LayoutAnswers { kind, visible, vpages });

@@ -271,9 +271,12 @@ fn a_walk_loads_each_lod_once_and_its_deltas_add_up() {
             let params = SessionParams { cache, resident_bytes: budget, ..Default::default() };
             let mut s = db.session(&params).unwrap();
             let (mut loaded, mut evicted, mut flips) = (0i64, 0i64, 0);
+            let mut reads = [0u64; 2]; // pages read on the way out, and on the way back
             for (k, &at) in path.iter().enumerate() {
                 let look = Some(if k < 40 { Vec3::X } else { Vec3::NEG_X });
                 let step = s.step(at, look).unwrap();
+                reads[usize::from(k >= 40)] += step.pages_read;
+                assert_eq!(step.pages_read, step.misses, "a page is read exactly when no buffer holds it");
                 loaded += step.loaded_bytes as i64;
                 evicted += step.evicted_bytes as i64;
                 flips += usize::from(step.flipped);
@@ -291,6 +294,11 @@ fn a_walk_loads_each_lod_once_and_its_deltas_add_up() {
                 assert!(step.items as usize <= s.answer().unwrap().items.len());
             }
             assert!(flips >= 6, "the path crosses cells ({flips} flips)");
+            if cache != PolicyKind::None {
+                // The default cache (256 pages) holds the whole walk's pages: the way back is free.
+                assert_eq!(reads[1], 0, "{cache}: the way back read {} pages", reads[1]);
+                assert!(reads[0] > 0);
+            }
             let total: u64 = s.resident().map(|(_, n)| n as u64).sum();
             assert_eq!(total as i64, loaded - evicted);
             if budget.is_none() {

@@ -121,7 +121,6 @@ fn flag_of(param: &str) -> &str {
         "eta" => "--eta",
         "tau" => "--tau",
         "camera" => "--look",
-        "session" => "--cache-pages",
         "scene" => "SCENE",
         other => other,
     }

@@ -151,8 +151,12 @@ pub struct QueryStats {
     pub vindex_pages: u64,
     /// Pages read from the layout's V-page file.
     pub vpage_pages: u64,
-    /// All light-weight pages: tree + index + V-pages.
+    /// All light-weight pages read: tree + index + V-pages.
     pub pages_read: u64,
+    /// Page requests, and those served without a read (the reader's buffer or a session's
+    /// cache held the page): `pages_read = pages_requested − page_hits`.
+    pub pages_requested: u64,
+    pub page_hits: u64,
     /// Tree nodes whose page the query read.
     pub nodes_visited: u64,
     /// Faces of all items.
@@ -211,6 +215,8 @@ impl Database {
             vindex_pages: io.vindex,
             vpage_pages: io.vpages,
             pages_read: io.tree + io.vindex + io.vpages,
+            pages_requested: io.requested,
+            page_hits: io.hits,
             nodes_visited: out.nodes_visited,
             faces: out.items.iter().map(|i| u64::from(i.faces)).sum(),
             geometry_bytes: 0,

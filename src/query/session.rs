@@ -69,7 +69,8 @@ pub struct Step {
     pub resident_bytes: u64,
     /// Light-weight pages read (tree, V-index, V-pages) by this step's query.
     pub pages_read: u64,
-    /// Page requests the cache served, and those it did not.
+    /// Page requests served without a read (the cache, or the reader's buffer of the page
+    /// just read), and those read from the file.
     pub hits: u64,
     pub misses: u64,
     /// Pages prefetch read for the cell ahead.
@@ -105,14 +106,14 @@ pub struct Session<'db> {
 impl Database {
     /// Starts a walkthrough session. Checks the parameters; reads nothing yet.
     pub fn session(&self, params: &SessionParams) -> Result<Session<'_>> {
-        if params.query.camera.is_some_and(|c| c.check().is_err()) || params.cache_pages == Some(0) {
-            return Err(Error::bad_param("session", "a bad camera or a zero-page cache"));
+        if let Some(cam) = &params.query.camera {
+            cam.check().map_err(|r| Error::bad_param("camera", r))?;
         }
-        let _limits = CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
+        let limits = CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
         Ok(Session {
             db: self,
             params: *params,
-            access: Access::open(self, params.query.layout)?,
+            access: Access::cached(self, params.query.layout, limits, params.cache)?,
             answer: None,
             last_at: None,
             resident: HashMap::new(),
@@ -136,6 +137,8 @@ impl<'db> Session<'db> {
             let query = QueryParams { camera: None, ..self.params.query };
             let answer = self.db.query_with(&mut self.access, at, &query)?;
             step.pages_read = answer.stats.pages_read;
+            step.hits = answer.stats.page_hits;
+            step.misses = answer.stats.pages_requested - answer.stats.page_hits;
             self.answer = Some(answer);
             self.delta_load(&mut step)?;
         }
