@@ -31,7 +31,7 @@ use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
 use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, Overwrite, PageFileWriter, VData, write_layout};
-pub use params::{BuildParams, VisibilityParams, limits};
+pub use params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]

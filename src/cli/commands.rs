@@ -74,7 +74,7 @@ pub struct BuildArgs {
     /// Bytes per tree node page and V-page layout page.
     #[arg(long, default_value_t = 4096)]
     page_size: u32,
-    /// Most entries per tree node (default: what a page holds, 126 at 4 KiB).
+    /// Most entries per tree node (default 16, or what a page holds if fewer).
     #[arg(long)]
     fanout: Option<u32>,
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
