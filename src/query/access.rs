@@ -89,6 +89,12 @@ impl<'db> Access<'db> {
         }
     }
 
+    /// The page cache's counts since the last reset: requests that got past the read buffers,
+    /// and those the cache served.
+    pub fn cache_stats(&self) -> hdov_storage::CacheStats {
+        self.pages.cache().stats()
+    }
+
     /// Zeroes the counts and forgets the read buffers (the cache keeps its pages).
     pub fn reset_io(&mut self) {
         self.pages.reset_io();

@@ -73,6 +73,10 @@ pub struct Step {
     /// just read), and those read from the file.
     pub hits: u64,
     pub misses: u64,
+    /// Of those, the requests that reached the page cache (past the read buffers), and those
+    /// it served: the cache's own hit rate is `cache_hits / cache_requests`.
+    pub cache_requests: u64,
+    pub cache_hits: u64,
     /// Pages prefetch read for the cell ahead.
     pub prefetch_pages: u64,
     /// Items and faces drawn this step (culled to the step's view when it has a look).
@@ -139,6 +143,8 @@ impl<'db> Session<'db> {
             step.pages_read = answer.stats.pages_read;
             step.hits = answer.stats.page_hits;
             step.misses = answer.stats.pages_requested - answer.stats.page_hits;
+            let cache = self.access.cache_stats();
+            (step.cache_requests, step.cache_hits) = (cache.requests, cache.hits);
             self.answer = Some(answer);
             self.delta_load(&mut step)?;
         }
