@@ -4,7 +4,7 @@ mod dov_common;
 
 use std::path::Path;
 
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 use hdov::scene::{BaseMesh, Object, Scene};
 
 use hdov::db::TREE_FILE;
@@ -13,31 +13,8 @@ use hdov::rtree::{RTree, TreeAlgorithm};
 use hdov::{BuildParams, Database};
 use hdov_storage::PageReader;
 
-/// A small town: `n × n` boxes of varied height, each its own base mesh, and a sphere instanced
-/// on every other street corner (so instancing is exercised).
 fn town(n: usize) -> Scene {
-    let mut scene = Scene::default();
-    scene.meshes.push(BaseMesh { name: "ball".into(), mesh: dov_common::icosphere(3) });
-    for i in 0..n {
-        for j in 0..n {
-            let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
-            let h = 5.0 + ((i * 7 + j * 13) % 11) as f32 * 3.0;
-            let name = format!("house_{i}_{j}");
-            let place = Mat4::from_translation(Vec3::new(x + 6.0, h / 2.0, z + 6.0))
-                * Mat4::from_scale(Vec3::new(12.0, h, 12.0));
-            scene.objects.push(Object {
-                name: name.clone(),
-                mesh: scene.meshes.len() as u32,
-                transform: Mat4::IDENTITY,
-            });
-            scene.meshes.push(BaseMesh { name, mesh: hdov::lod::transformed(&dov_common::unit_cube(), &place) });
-            if (i + j) % 2 == 0 {
-                let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
-                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
-            }
-        }
-    }
-    scene
+    dov_common::town(n, 3)
 }
 
 fn build(dir: &Path, params: &BuildParams) -> hdov::BuildReport {

@@ -14,16 +14,17 @@ use std::fs;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use hdov::db::catalog::{Catalog, LodRef};
 use hdov::db::tree_page::NodePage;
 use hdov::dov::BackendKind;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::progress::Progress;
-use hdov::scene::{BaseMesh, Mesh, Object, Scene};
+use hdov::scene::{Mesh, Scene};
 use hdov::{BuildParams, Database, Info, VisibilityParams};
 use hdov_storage::blob::{BLOB_HEADER_LEN, RECORD_HEADER_LEN};
+use hdov_storage::mutation::{Rng, mutate};
 use hdov_storage::pagefile::reseal_checksums as reseal_page_checksums;
 use hdov_storage::{LayoutKind, PageReader, ReadMode, VEntry};
 use serde_json::{Value, json};
@@ -34,44 +35,9 @@ const CATALOG: &str = "catalog.blob";
 const MANIFEST: &str = "manifest.json";
 const PAGE_SIZE: usize = 256;
 
-/// xorshift64*: reproducible test randomness without a dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
-/// A small town (`n × n` boxes, a sphere instanced on every other corner) under a grid of
-/// `dims` cells.
+/// The shared test town (`dov_common::town`) under a grid of `dims` cells.
 fn town(n: usize, dims: [u32; 3]) -> Scene {
-    let mut scene = Scene::default();
-    scene.meshes.push(BaseMesh { name: "ball".into(), mesh: dov_common::icosphere(2) });
-    for i in 0..n {
-        for j in 0..n {
-            let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
-            let h = 5.0 + ((i * 7 + j * 13) % 11) as f32 * 3.0;
-            let name = format!("house_{i}_{j}");
-            let place = Mat4::from_translation(Vec3::new(x + 6.0, h / 2.0, z + 6.0))
-                * Mat4::from_scale(Vec3::new(12.0, h, 12.0));
-            scene.objects.push(Object {
-                name: name.clone(),
-                mesh: scene.meshes.len() as u32,
-                transform: Mat4::IDENTITY,
-            });
-            scene.meshes.push(BaseMesh { name, mesh: hdov::lod::transformed(&dov_common::unit_cube(), &place) });
-            if (i + j) % 2 == 0 {
-                let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
-                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
-            }
-        }
-    }
+    let mut scene = dov_common::town(n, 2);
     let extent = n as f32 * 20.0;
     let region = Aabb::new(Vec3::new(-2.0, 1.5, -2.0), Vec3::new(extent - 1.0, 2.0, extent - 1.0));
     scene.grid = Some(ViewGrid::new(region, dims));
@@ -202,49 +168,6 @@ fn reseal_blob_checksums(b: &mut [u8]) {
 
 /// One random damage to a file image: truncation, garbage appended, a field-sized run
 /// overwritten with an extreme or random value, or flipped bits. Returns what it did.
-fn mutate(rng: &mut Rng, good: &[u8]) -> (Vec<u8>, String) {
-    let mut b = good.to_vec();
-    let what = match rng.below(5) {
-        0 => {
-            let n = rng.below(good.len() + 1);
-            b.truncate(n);
-            format!("truncated to {n} bytes")
-        }
-        1 => {
-            let n = rng.below(200) + 1;
-            b.extend((0..n).map(|_| rng.next() as u8));
-            format!("{n} bytes of garbage appended")
-        }
-        2 => {
-            let at = rng.below(b.len());
-            let v: [u8; 8] = match rng.below(3) {
-                0 => [0xFF; 8],
-                1 => [0; 8],
-                _ => rng.next().to_le_bytes(),
-            };
-            let n = 1 + rng.below(8);
-            for (i, x) in v.iter().take(n).enumerate() {
-                if let Some(y) = b.get_mut(at + i) {
-                    *y = *x;
-                }
-            }
-            format!("{n} bytes at {at} set to {:02x?}", &v[..n])
-        }
-        _ => {
-            let mut at = Vec::new();
-            for _ in 0..1 + rng.below(8) {
-                let i = rng.below(b.len());
-                let bit = rng.below(8);
-                if let Some(y) = b.get_mut(i) {
-                    *y ^= 1 << bit;
-                }
-                at.push((i, bit));
-            }
-            format!("bits flipped (byte, bit): {at:?}")
-        }
-    };
-    (b, what)
-}
 
 /// What one damaged database gave.
 #[derive(Debug, Default)]

@@ -11,6 +11,7 @@
 //! - [`cache`]: the page cache behind every [`PageReader`], bounded in pages and bytes, with
 //!   `none`, LRU, DoV and DoV-Time eviction (priorities as numbers);
 //! - [`synthetic`]: reproducible synthetic V-data for tests, benchmarks and size tables;
+//! - [`mutation`]: reproducible damage to files, for mutation tests and fuzz seeds;
 //! - [`atomic`]: a database directory is written beside its target and swapped into place.
 //!
 //! Every decoder checks bounds and checksums: a corrupted file gives an [`Error`], never a panic.
@@ -22,6 +23,7 @@ pub mod error;
 pub mod io_stats;
 pub mod layout;
 mod le;
+pub mod mutation;
 pub mod page_reader;
 pub mod pagefile;
 pub mod synthetic;

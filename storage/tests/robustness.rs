@@ -11,19 +11,7 @@ use hdov_storage::{
     write_layout,
 };
 
-/// xorshift64*: reproducible test randomness without a dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
+use hdov_storage::mutation::Rng;
 
 use hdov_storage::pagefile::reseal_checksums as refresh_page_checksums;
 
@@ -34,35 +22,9 @@ fn refresh_blob_checksums(b: &mut [u8]) {
     }
 }
 
+/// One random mutation of `good` (the storage crate's shared test kit).
 fn mutate(rng: &mut Rng, good: &[u8]) -> Vec<u8> {
-    let mut b = good.to_vec();
-    match rng.below(5) {
-        0 => b.truncate(rng.below(good.len() + 1)),
-        1 => b.extend((0..rng.below(200) + 1).map(|_| rng.next() as u8)),
-        2 => {
-            // Overwrite a field-sized run with an extreme or random value.
-            let at = rng.below(b.len());
-            let v: [u8; 8] = match rng.below(3) {
-                0 => [0xFF; 8],
-                1 => [0; 8],
-                _ => rng.next().to_le_bytes(),
-            };
-            for (i, x) in v.iter().take(1 + rng.below(8)).enumerate() {
-                if let Some(y) = b.get_mut(at + i) {
-                    *y = *x;
-                }
-            }
-        }
-        _ => {
-            for _ in 0..1 + rng.below(8) {
-                let at = rng.below(b.len());
-                if let Some(y) = b.get_mut(at) {
-                    *y ^= 1 << rng.below(8);
-                }
-            }
-        }
-    }
-    b
+    hdov_storage::mutation::mutate(rng, good).0
 }
 
 fn sample_layouts(dir: &Path, page_size: u32, dov: DovCodec) {

@@ -206,3 +206,31 @@ pub fn city_block(n: u32, props: bool) -> Scene {
     }
     b.build()
 }
+
+/// A small town: `n × n` boxes of varied height, each its own base mesh, and a sphere instanced
+/// on every other street corner (so instancing is exercised), an icosphere of
+/// `ball_subdivisions`.
+pub fn town(n: usize, ball_subdivisions: u32) -> Scene {
+    let mut scene = Scene::default();
+    scene.meshes.push(BaseMesh { name: "ball".into(), mesh: icosphere(ball_subdivisions) });
+    for i in 0..n {
+        for j in 0..n {
+            let (x, z) = (i as f32 * 20.0, j as f32 * 20.0);
+            let h = 5.0 + ((i * 7 + j * 13) % 11) as f32 * 3.0;
+            let name = format!("house_{i}_{j}");
+            let place = Mat4::from_translation(Vec3::new(x + 6.0, h / 2.0, z + 6.0))
+                * Mat4::from_scale(Vec3::new(12.0, h, 12.0));
+            scene.objects.push(Object {
+                name: name.clone(),
+                mesh: scene.meshes.len() as u32,
+                transform: Mat4::IDENTITY,
+            });
+            scene.meshes.push(BaseMesh { name, mesh: hdov::lod::transformed(&unit_cube(), &place) });
+            if (i + j) % 2 == 0 {
+                let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
+                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
+            }
+        }
+    }
+    scene
+}
