@@ -166,9 +166,6 @@ fn reseal_blob_checksums(b: &mut [u8]) {
     }
 }
 
-/// One random damage to a file image: truncation, garbage appended, a field-sized run
-/// overwritten with an extreme or random value, or flipped bits. Returns what it did.
-
 /// What one damaged database gave.
 #[derive(Debug, Default)]
 struct Tally {

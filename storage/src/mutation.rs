@@ -7,6 +7,8 @@
 pub struct Rng(pub u64);
 
 impl Rng {
+    /// The next number. (Not an `Iterator`: the stream never ends and callers want a `u64`.)
+    #[allow(clippy::should_implement_trait)]
     pub fn next(&mut self) -> u64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;
