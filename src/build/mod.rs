@@ -123,7 +123,11 @@ pub fn build(
         objects: scene
             .objects
             .iter()
-            .map(|o| ObjectRecord { name: o.name.clone(), mesh: o.mesh, transform: o.transform.to_cols_array() })
+            .map(|o| ObjectRecord {
+                name: o.name.as_str().into(),
+                mesh: o.mesh,
+                transform: o.transform.to_cols_array(),
+            })
             .collect(),
         mesh_names: scene.meshes.iter().map(|m| m.name.clone()).collect(),
         node_shapes: node_shapes(&tree, scene, &mesh_lods, &node_lods),

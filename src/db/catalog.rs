@@ -22,7 +22,8 @@ impl LodRef {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ObjectRecord {
-    pub name: String,
+    /// Shared with every answer that returns the object (a query copies no names).
+    pub name: std::sync::Arc<str>,
     pub mesh: u32,
     /// Column-major 4×4.
     pub transform: [f32; 16],

@@ -123,7 +123,7 @@ pub struct Item {
     /// Object index or node id.
     pub id: u32,
     /// The object's name, or `node N`.
-    pub name: String,
+    pub name: std::sync::Arc<str>,
     /// LOD level, 0 = finest.
     pub lod: u32,
     pub faces: u32,

@@ -154,7 +154,7 @@ impl Traversal<'_, '_> {
 
     fn push_node(&mut self, n: u32, lod: usize, d: f64, mbr: Aabb) {
         let lod_ref = self.db.catalog().node_lods[n as usize][lod];
-        self.items.push(item(ItemKind::Node, n, format!("node {n}"), lod, lod_ref, d, mbr));
+        self.items.push(item(ItemKind::Node, n, format!("node {n}").into(), lod, lod_ref, d, mbr));
     }
 
     /// Naive mode: the visible objects of every leaf, reading only leaf V-pages (and the leaf's
@@ -267,7 +267,7 @@ fn fit(chain: &[LodRef], budget: u64, preferred: usize) -> (usize, bool) {
     }
 }
 
-fn item(kind: ItemKind, id: u32, name: String, lod: usize, lod_ref: LodRef, d: f64, mbr: Aabb) -> Item {
+fn item(kind: ItemKind, id: u32, name: std::sync::Arc<str>, lod: usize, lod_ref: LodRef, d: f64, mbr: Aabb) -> Item {
     Item { kind, id, name, lod: lod as u32, faces: lod_ref.faces, dov: d as f32, mbr, lod_ref }
 }
 

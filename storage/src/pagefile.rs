@@ -21,7 +21,7 @@ use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use crate::error::{Error, Result, path_str};
 use crate::le::{tag_str, u32_at, u64_at};
@@ -157,6 +157,9 @@ pub struct PageFile {
     backing: Backing,
     page_size: u32,
     page_count: u64,
+    /// One bit per page: its checksum has been checked. A mapped page of an immutable file is
+    /// checked once per open (pages read with `pread` come from the disk anew, and every time).
+    checked: Box<[AtomicU64]>,
 }
 
 impl std::fmt::Debug for PageFile {
@@ -213,7 +216,8 @@ impl PageFile {
         };
         let name = path.file_name().map_or_else(|| path_str(path), |n| n.to_string_lossy().into_owned());
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
-        Ok(Self { path: path.to_path_buf(), name, id, backing, page_size, page_count })
+        let checked = (0..page_count.div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
+        Ok(Self { path: path.to_path_buf(), name, id, backing, page_size, page_count, checked })
     }
 
     pub fn path(&self) -> &Path {
@@ -271,9 +275,14 @@ impl PageFile {
             }
         };
         let cap = ps - PAGE_CRC_LEN;
-        let stored = u32_at(&page, cap).unwrap_or(0);
-        if crc32fast::hash(&page[..cap]) != stored {
-            return Err(Error::Checksum { path: path_str(&self.path), page: n });
+        let (word, bit) = (&self.checked[(n / 64) as usize], 1u64 << (n % 64));
+        let mapped = matches!(page, Cow::Borrowed(_));
+        if !(mapped && word.load(Ordering::Relaxed) & bit != 0) {
+            let stored = u32_at(&page, cap).unwrap_or(0);
+            if crc32fast::hash(&page[..cap]) != stored {
+                return Err(Error::Checksum { path: path_str(&self.path), page: n });
+            }
+            word.fetch_or(bit, Ordering::Relaxed);
         }
         Ok(match page {
             Cow::Borrowed(b) => Cow::Borrowed(&b[..cap]),
