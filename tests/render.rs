@@ -205,6 +205,7 @@ fn coverage_difference_by_hand() {
     assert_eq!(fidelity::coverage_diff(&a, &b, 0.05), 0.25);
     let f = fidelity::compare(&a, &b);
     assert_eq!(f.coverage_diff, 0.5);
+    assert_eq!(f.silhouette_diff, 0.25);
     assert_eq!(f.psnr, f64::INFINITY);
 }
 

@@ -138,7 +138,12 @@ pub fn render(a: RenderCmd) -> Result<()> {
         report.adapter
     );
     if let Some(f) = fid {
-        println!("  against full detail: PSNR {:.2} dB, coverage difference {:.3} %", f.psnr, f.coverage_diff * 100.0);
+        println!(
+            "  against full detail: PSNR {:.2} dB, coverage difference {:.3} % (silhouettes alone {:.3} %)",
+            f.psnr,
+            f.coverage_diff * 100.0,
+            f.silhouette_diff * 100.0
+        );
     }
     Ok(())
 }

@@ -71,9 +71,16 @@ pub struct Fidelity {
     pub psnr: f64,
     /// Share of pixels, 0..=1, with [`DEFAULT_DEPTH_TOLERANCE`].
     pub coverage_diff: f64,
+    /// Share of pixels where only one image shows a surface (coverage difference without the
+    /// depth test: the silhouettes alone).
+    pub silhouette_diff: f64,
 }
 
 /// The fidelity of `image` against `reference` (e.g. an answer's view against full detail).
 pub fn compare(image: &Image, reference: &Image) -> Fidelity {
-    Fidelity { psnr: psnr(image, reference), coverage_diff: coverage_diff(image, reference, DEFAULT_DEPTH_TOLERANCE) }
+    Fidelity {
+        psnr: psnr(image, reference),
+        coverage_diff: coverage_diff(image, reference, DEFAULT_DEPTH_TOLERANCE),
+        silhouette_diff: coverage_diff(image, reference, f32::INFINITY),
+    }
 }
