@@ -46,11 +46,13 @@ pub mod db;
 pub mod dov;
 pub mod error;
 pub mod geom;
+pub mod gfx;
 pub mod grid;
 pub mod lod;
 pub mod progress;
 pub mod query;
 pub mod record;
+pub mod render;
 pub mod rtree;
 pub mod scene;
 

@@ -460,3 +460,45 @@ fn query_and_walk_answer_in_json() {
     std::fs::write(s("out.csv"), format!("{x},1.7,{z}\n{},1.7,{z}\n", x + 1e5)).unwrap();
     assert_refused(&hdov(&["walk", &s("db"), "--path", &s("out.csv")]), "out.csv: line 2");
 }
+
+/// `hdov render` writes a PNG of the answer (or full detail), reports fidelity against full
+/// detail in JSON, and refuses bad views in one line.
+#[test]
+fn render_writes_a_png_and_reports_fidelity() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city")]).status.success());
+    let o = hdov(&["build", &s("city/city.json"), "--out", &s("db"), "--resolution", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let view = ["--at", "115,1.8,105", "--look", "1,0,0.3"];
+    let db = s("db");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", db.as_str()];
+        args.extend_from_slice(&view);
+        args.extend_from_slice(extra);
+        hdov(&args)
+    };
+    assert_refused(&render(&["--size", "0x10"]), "--size");
+    assert_refused(&render(&["--color", "rainbow"]), "rainbow");
+    assert_refused(&hdov(&["render", &db, "--at", "115,1.8,105", "--look", "0,0,0"]), "--look");
+    if !hdov::dov::gpu::adapter_or_skip() {
+        return;
+    }
+    let out = s("answer.png");
+    let o = render(&["--size", "64x40", "--color", "lod", "--out", &out, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON document");
+    assert!(report["fidelity"]["coverage_diff"].as_f64().unwrap() <= 1.0);
+    assert!(report["items"].as_u64().unwrap() > 0);
+    let decoder = png::Decoder::new(std::fs::File::open(&out).unwrap());
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (64, 40));
+    let full = s("full.png");
+    let o = render(&["--size", "64x40", "--full", "--out", &full]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("full detail"));
+    let o = render(&["--size", "64x40", "--pair", "--out", &s("pair.png")]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("PSNR"), "{}", stderr(&o));
+    let reader = png::Decoder::new(std::fs::File::open(s("pair.png")).unwrap()).read_info().unwrap();
+    assert_eq!(reader.info().width, 64 * 2 + 4);
+}

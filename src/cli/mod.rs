@@ -5,6 +5,7 @@
 mod args;
 mod commands;
 mod query;
+mod render;
 
 use std::process::ExitCode;
 
@@ -37,6 +38,9 @@ enum Command {
     Query(query::QueryCmd),
     /// Walk a path of viewpoints through a database: cell flips, delta loads, cache hits.
     Walk(query::WalkCmd),
+    /// Draw the full-detail scene or a query's answer from a camera into a PNG; report PSNR and
+    /// coverage difference against full detail.
+    Render(render::RenderCmd),
 }
 
 pub fn main() -> ExitCode {
@@ -61,6 +65,7 @@ pub fn main() -> ExitCode {
         Command::Dov(a) => commands::dov(a),
         Command::Query(a) => query::query(a),
         Command::Walk(a) => query::walk(a),
+        Command::Render(a) => render::render(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -121,6 +126,7 @@ fn flag_of(param: &str) -> &str {
         "eta" => "--eta",
         "tau" => "--tau",
         "camera" => "--look",
+        "size" => "--size",
         "scene" => "SCENE",
         other => other,
     }

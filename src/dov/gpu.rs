@@ -18,18 +18,16 @@
 //! radians). An object whose box contains the point is drawn at full detail. docs/dov.md
 //! ("LOD-aware drawing") has the measured DoV change and speed-up.
 
-use std::sync::mpsc;
-
 use glam::{Mat4, Vec3, Vec4};
-use wgpu::util::DeviceExt;
 
 use super::cpu::{check_cube, check_point, check_resolution_and_near, world_triangles};
 use super::cubemap::{FACE_COUNT, face_basis};
 use super::{CubeMap, DovBackend, IdCube};
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
+use crate::gfx::{Gpu, Vertex, push_world};
 use crate::lod::LodLevel;
-use crate::scene::{Mesh, Scene};
+use crate::scene::Scene;
 
 /// Bytes between the six per-face uniform blocks (the largest `min_uniform_buffer_offset_alignment`
 /// wgpu allows).
@@ -63,15 +61,7 @@ impl Default for GpuOptions<'_> {
     }
 }
 
-/// Environment variable that makes the GPU tests fail instead of skip when no adapter exists.
-pub const REQUIRE_ADAPTER_ENV: &str = "HDOV_REQUIRE_ADAPTER";
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Vertex {
-    position: [f32; 3],
-    id: u32,
-}
+pub use crate::gfx::{REQUIRE_ADAPTER_ENV, adapter_available, adapter_or_skip, hardware_adapter_available};
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -80,77 +70,13 @@ struct FaceUniform {
     eye: [f32; 4],
 }
 
-/// The name of the adapter the GPU backend would use (e.g. "llvmpipe (LLVM 19.1.7, 256 bits) on
-/// Gl"), or `None` when wgpu finds none. Costs an instance and an adapter request.
-pub fn adapter_available() -> Option<String> {
-    request_adapter().ok().map(|a| describe(&a.get_info()))
-}
-
-/// Whether the adapter the GPU backend would use is real graphics hardware rather than a CPU
-/// rasteriser (llvmpipe, lavapipe, WARP). On a CPU rasteriser the ray caster is faster for large
-/// scenes, so `--backend auto` takes the GPU backend only on hardware.
-pub fn hardware_adapter_available() -> bool {
-    request_adapter().is_ok_and(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
-}
-
-/// For tests: `true` when a GPU test can run. Without an adapter it prints
-/// `skipped: no adapter (TEST)` and returns `false`, unless [`REQUIRE_ADAPTER_ENV`] is `1`, in
-/// which case it panics (CI sets it after installing Mesa, so a missing driver cannot pass
-/// silently).
-pub fn adapter_or_skip() -> bool {
-    if adapter_available().is_some() {
-        return true;
-    }
-    if std::env::var(REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") {
-        panic!("no wgpu adapter, and {REQUIRE_ADAPTER_ENV}=1 requires one");
-    }
-    // Written to the stderr handle itself, not through `eprintln!`, which the test harness
-    // captures and hides for passing tests: a skip must show in `cargo test`'s output.
-    use std::io::Write;
-    let test = std::thread::current().name().unwrap_or("a GPU test").to_string();
-    let _ = writeln!(std::io::stderr(), "skipped: no adapter ({test})");
-    false
-}
-
-/// The adapter the GPU backend uses. `WGPU_BACKEND` (e.g. `gl`, `vulkan`) picks the backend;
-/// otherwise the native APIs (Vulkan, Metal, DX12) are asked first and GL only when they offer
-/// nothing, which also keeps EGL from probing (and complaining about) display servers needlessly.
-fn request_adapter() -> std::result::Result<wgpu::Adapter, wgpu::RequestAdapterError> {
-    let request = |backends: Option<wgpu::Backends>| {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle().with_env();
-        if let Some(b) = backends {
-            desc.backends = b;
-        }
-        pollster::block_on(wgpu::Instance::new(desc).request_adapter(&adapter_options()))
-    };
-    if std::env::var_os("WGPU_BACKEND").is_some() {
-        return request(None);
-    }
-    request(Some(wgpu::Backends::PRIMARY)).or_else(|_| request(Some(wgpu::Backends::GL)))
-}
-
-fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {
-    wgpu::RequestAdapterOptions {
-        power_preference: wgpu::PowerPreference::HighPerformance,
-        force_fallback_adapter: false,
-        compatible_surface: None,
-        apply_limit_buckets: false,
-    }
-}
-
-fn describe(info: &wgpu::AdapterInfo) -> String {
-    format!("{} ({}) on {:?}", info.name, info.driver_info, info.backend)
-}
-
 /// Rasterises the id cube around a point with wgpu. Construction uploads all geometry once and
 /// allocates the render targets; each [`DovBackend::render_ids`] does 6 render passes (objects
 /// culled per face by their boxes), one copy and one blocking read-back of 6·R²·4 bytes.
 pub struct GpuBackend {
     cube: CubeMap,
     near: f32,
-    adapter_name: String,
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+    gpu: Gpu,
     pipeline: wgpu::RenderPipeline,
     uniforms: wgpu::Buffer,
     face_bind_groups: Vec<wgpu::BindGroup>,
@@ -205,21 +131,12 @@ impl GpuBackend {
                 format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
             ));
         }
-        let adapter = request_adapter().map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
-        let adapter_name = describe(&adapter.get_info());
-        let limits = adapter.limits();
-        if resolution > limits.max_texture_dimension_2d {
-            return Err(Error::Gpu(format!(
-                "resolution {resolution} exceeds the adapter's texture limit {}",
-                limits.max_texture_dimension_2d
-            )));
+        let gpu = Gpu::open("hdov dov")?;
+        let limit = gpu.limits.max_texture_dimension_2d;
+        if resolution > limit {
+            return Err(Error::Gpu(format!("resolution {resolution} exceeds the adapter's texture limit {limit}")));
         }
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("hdov dov"),
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|e| Error::Gpu(format!("{adapter_name}: no device: {e}")))?;
+        let device = &gpu.device;
 
         // Validation and out-of-memory errors become `Error::Gpu` instead of wgpu's default panic.
         // (Scopes pop in reverse order; an early return drops them in reverse order too.)
@@ -228,20 +145,7 @@ impl GpuBackend {
         let origin = scene.bounds().center();
         let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
         let geometry = Geometry::build(scene, origin, options.lods)?;
-        let max_buffer = limits.max_buffer_size;
-        let vertex_bytes = (geometry.vertices.len() * std::mem::size_of::<Vertex>()) as u64;
-        if vertex_bytes > max_buffer {
-            return Err(Error::Gpu(format!(
-                "{adapter_name}: the scene's {vertex_bytes} vertex bytes exceed the buffer limit {max_buffer}"
-            )));
-        }
-        let vertices = (!geometry.vertices.is_empty()).then(|| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("dov vertices"),
-                contents: bytemuck::cast_slice(&geometry.vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            })
-        });
+        let vertices = gpu.upload_vertices("dov vertices", &geometry.vertices)?;
 
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("dov face uniforms"),
@@ -278,7 +182,7 @@ impl GpuBackend {
                 })
             })
             .collect();
-        let pipeline = create_pipeline(&device, &bind_layout);
+        let pipeline = create_pipeline(device, &bind_layout);
 
         let extent = wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 };
         let face_targets = (0..FACE_COUNT)
@@ -308,24 +212,18 @@ impl GpuBackend {
             view_formats: &[],
         });
         let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
-        let padded_row_bytes = (resolution * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("dov readback"),
-            size: padded_row_bytes as u64 * resolution as u64 * FACE_COUNT as u64,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let padded_row_bytes = crate::gfx::padded_row_bytes(resolution, 4);
+        let readback =
+            gpu.readback_buffer("dov readback", padded_row_bytes as u64 * resolution as u64 * FACE_COUNT as u64);
         for scope in [out_of_memory, validation] {
             if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(Error::Gpu(format!("{adapter_name}: setting up: {e}")));
+                return Err(Error::Gpu(format!("{}: setting up: {e}", gpu.adapter_name)));
             }
         }
         Ok(Self {
             cube: CubeMap::new(resolution),
             near,
-            adapter_name,
-            device,
-            queue,
+            gpu,
             pipeline,
             uniforms,
             face_bind_groups,
@@ -344,7 +242,7 @@ impl GpuBackend {
 
     /// The adapter's name, driver and backend, e.g. "llvmpipe (...) on Vulkan".
     pub fn adapter_name(&self) -> &str {
-        &self.adapter_name
+        &self.gpu.adapter_name
     }
 
     pub fn near(&self) -> f32 {
@@ -465,10 +363,9 @@ impl Geometry {
                 let m = o.transform;
                 let scale =
                     m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
-                let mirrored = m.determinant() < 0.0;
                 for level in lods[o.mesh as usize].iter().skip(1) {
                     let first = vertices.len() as u32;
-                    push_world(&mut vertices, &level.mesh, &m, mirrored, origin, object as u32);
+                    push_world(&mut vertices, &level.mesh, &m, origin, object as u32);
                     // Culling must keep a coarse level that bulges out of the full-detail box.
                     for v in &vertices[first as usize..] {
                         bounds = bounds.grow(Vec3::from(v.position));
@@ -486,18 +383,6 @@ impl Geometry {
     }
 }
 
-/// Appends `mesh` transformed by `m` (winding reversed when `mirrored`, as the full-detail
-/// triangles are), relative to `origin`, with object id `id`.
-fn push_world(vertices: &mut Vec<Vertex>, mesh: &Mesh, m: &Mat4, mirrored: bool, origin: Vec3, id: u32) {
-    for t in mesh.triangles() {
-        let t = if mirrored { [t[0], t[2], t[1]] } else { t };
-        for p in t {
-            let rel = m.transform_point3(p) - origin;
-            vertices.push(Vertex { position: rel.to_array(), id });
-        }
-    }
-}
-
 fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
     let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("dov id cube"),
@@ -508,7 +393,6 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
         bind_group_layouts: &[Some(bind_layout)],
         immediate_size: 0,
     });
-    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some("dov id cube"),
         layout: Some(&layout),
@@ -516,11 +400,7 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
             module: &shader,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &attributes,
-            })],
+            buffers: &[Some(Vertex::layout())],
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
@@ -564,7 +444,7 @@ fn clip_from_rel(face: usize, near: f32) -> Mat4 {
 
 impl DovBackend for GpuBackend {
     fn name(&self) -> String {
-        format!("gpu ({})", self.adapter_name)
+        format!("gpu ({})", self.gpu.adapter_name)
     }
 
     fn resolution(&self) -> u32 {
@@ -580,17 +460,17 @@ impl DovBackend for GpuBackend {
         let r = self.cube.resolution();
         check_cube(out, r)?;
         let eye = p - self.origin;
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let validation = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let chosen = self.chosen_ranges(eye);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
                 clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
                 eye: eye.extend(0.0).to_array(),
             };
-            self.queue.write_buffer(&self.uniforms, face as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
+            self.gpu.queue.write_buffer(&self.uniforms, face as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
         }
         let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
+            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
         for face in 0..FACE_COUNT {
             let ranges = self.visible_ranges(face, eye, &chosen);
             self.triangles_drawn += ranges.iter().map(|r| r.len() as u64 / 3).sum::<u64>();
@@ -645,9 +525,9 @@ impl DovBackend for GpuBackend {
                 wgpu::Extent3d { width: r, height: r, depth_or_array_layers: 1 },
             );
         }
-        self.queue.submit([encoder.finish()]);
+        self.gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(validation.pop()) {
-            return Err(Error::Gpu(format!("{}: rendering: {e}", self.adapter_name)));
+            return Err(Error::Gpu(format!("{}: rendering: {e}", self.gpu.adapter_name)));
         }
         self.read_back(out)
     }
@@ -656,32 +536,14 @@ impl DovBackend for GpuBackend {
 impl GpuBackend {
     /// Maps the read-back buffer (blocking until the GPU is done) and strips the row padding.
     fn read_back(&self, out: &mut IdCube) -> Result<()> {
-        let slice = self.readback.slice(..);
-        let (sender, receiver) = mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |result| {
-            // The receiver outlives the poll below; a failed send only means it gave up.
-            let _ = sender.send(result);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu(format!("{}: poll: {e}", self.adapter_name)))?;
-        receiver
-            .recv()
-            .map_err(|e| Error::Gpu(format!("{}: map callback lost: {e}", self.adapter_name)))?
-            .map_err(|e| Error::Gpu(format!("{}: map: {e}", self.adapter_name)))?;
-        {
-            let data = slice
-                .get_mapped_range()
-                .map_err(|e| Error::Gpu(format!("{}: mapped range: {e}", self.adapter_name)))?;
-            let r = self.cube.resolution() as usize;
-            let row_bytes = r * 4;
+        let r = self.cube.resolution() as usize;
+        let row_bytes = r * 4;
+        self.gpu.read_buffer(&self.readback, |data| {
             for (dst, src) in out.ids.chunks_exact_mut(r).zip(data.chunks_exact(self.padded_row_bytes as usize)) {
                 for (d, s) in dst.iter_mut().zip(src[..row_bytes].chunks_exact(4)) {
                     *d = u32::from_le_bytes([s[0], s[1], s[2], s[3]]);
                 }
             }
-        }
-        self.readback.unmap();
-        Ok(())
+        })
     }
 }
