@@ -51,6 +51,7 @@ pub mod lod;
 pub mod progress;
 pub mod query;
 pub mod record;
+pub mod review;
 pub mod rtree;
 pub mod scene;
 

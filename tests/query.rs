@@ -74,8 +74,9 @@ fn the_three_layouts_give_identical_answers_in_every_mode() {
     let db = city(&tmp.path().join("db"));
     for at in cell_centres(&db) {
         for p in [q(Mode::Threshold, 1e-3), q(Mode::Threshold, 8e-3), q(Mode::Budget, 0.0), q(Mode::Vmsse, 0.0)] {
-            let answers: Vec<_> =
-                LayoutKind::ALL.map(|layout| items(&db.query(at, &QueryParams { layout: Some(layout), ..p }).unwrap())).into();
+            let answers: Vec<_> = LayoutKind::ALL
+                .map(|layout| items(&db.query(at, &QueryParams { layout: Some(layout), ..p }).unwrap()))
+                .into();
             assert!(answers.windows(2).all(|w| w[0] == w[1]), "{at} {:?}: layouts disagree", p.mode);
         }
     }

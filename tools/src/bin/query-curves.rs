@@ -114,9 +114,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(out.join("cache_hits.csv"), csv.join("\n") + "\n")?;
 
     // Prefetch: the continuous walks with and without it, DoV-Time cache of 64 pages.
-    println!("\n| prefetch | pages read on arrival | pages prefetched | cache hit rate | step µs p99 |\n|---|---|---|---|---|");
+    println!(
+        "\n| prefetch | pages read on arrival | pages prefetched | cache hit rate | step µs p99 |\n|---|---|---|---|---|"
+    );
     for prefetch in [false, true] {
-        let params = SessionParams { cache: PolicyKind::DOV_TIME, cache_pages: Some(64), prefetch, ..Default::default() };
+        let params =
+            SessionParams { cache: PolicyKind::DOV_TIME, cache_pages: Some(64), prefetch, ..Default::default() };
         let mut s = db.session(&params)?;
         let (mut read, mut ahead, mut hits, mut requests, mut micros) = (0, 0, 0, 0, Vec::new());
         for &at in &continuous {
