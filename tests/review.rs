@@ -257,7 +257,7 @@ fn bad_review_parameters_are_refused_and_a_visual_walk_takes_dplru() {
     let tmp = tempfile::tempdir().unwrap();
     let db = city(&tmp.path().join("db"));
     for (p, name) in [
-        (ReviewParams { review_box: 0.5, ..Default::default() }, "review-box"),
+        (ReviewParams { review_box: 0.5, ..Default::default() }, "review_box"),
         (ReviewParams { eyesight: 0.0, ..Default::default() }, "eyesight"),
         (ReviewParams { fov_deg: 180.0, ..Default::default() }, "fov"),
     ] {

@@ -121,6 +121,9 @@ fn flag_of(param: &str) -> &str {
         "eta" => "--eta",
         "tau" => "--tau",
         "camera" => "--look",
+        "review_box" => "--review-box",
+        "eyesight" => "--eyesight",
+        "fov" => "--fov",
         "scene" => "SCENE",
         other => other,
     }

@@ -75,7 +75,11 @@ impl Catalog {
             ));
         }
         if let Some(s) = self.node_shapes.iter().find(|s| {
-            s.leaves == 0 || s.objects == 0 || s.objects as usize > self.objects.len() || !(s.face_ratio >= 0.0)
+            s.leaves == 0
+                || s.objects == 0
+                || s.objects as usize > self.objects.len()
+                || s.face_ratio.is_nan()
+                || s.face_ratio < 0.0
         }) {
             return Err(format!("a node shape that cannot be: {s:?}"));
         }

@@ -69,7 +69,7 @@ impl ReviewParams {
     /// Checks the numbers; returns the parameter's name and the reason of the first bad one.
     pub fn check(&self) -> Result<(), (&'static str, String)> {
         if !(self.review_box.is_finite() && self.review_box >= 1.0) {
-            return Err(("review-box", format!("{} must be finite and >= 1", self.review_box)));
+            return Err(("review_box", format!("{} must be finite and >= 1", self.review_box)));
         }
         if !(self.eyesight.is_finite() && self.eyesight > 0.0) {
             return Err(("eyesight", format!("{} must be finite and > 0", self.eyesight)));
@@ -78,7 +78,7 @@ impl ReviewParams {
             return Err(("fov", format!("{}° is not in (0, 180)", self.fov_deg)));
         }
         if !(self.prefetch_k.is_finite() && self.prefetch_k >= 0.0) {
-            return Err(("prefetch-k", format!("{} must be finite and >= 0", self.prefetch_k)));
+            return Err(("prefetch_k", format!("{} must be finite and >= 0", self.prefetch_k)));
         }
         Ok(())
     }
