@@ -53,6 +53,7 @@ pub mod progress;
 pub mod query;
 pub mod record;
 pub mod render;
+pub mod review;
 pub mod rtree;
 pub mod scene;
 

@@ -455,6 +455,23 @@ fn query_and_walk_answer_in_json() {
         }
     }
     assert!(steps[0]["flipped"] == true && w["summary"]["flips"].as_u64().unwrap() >= 2);
+    // The same path by REVIEW: disk cells, CSearch, a DPLRU cache, prefetch.
+    let review = |extra: &[&str]| {
+        let (db, path) = (s("db"), s("walk.csv"));
+        let mut args = vec!["walk", db.as_str(), "--path", path.as_str(), "--method", "review", "--cache", "dplru"];
+        args.extend_from_slice(extra);
+        hdov(&args)
+    };
+    let o = review(&["--review-box", "1.5", "--eyesight", "20", "--fov", "60", "--prefetch", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let w: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let steps = w["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 13);
+    assert!(steps[0]["flipped"] == true && w["summary"]["flips"].as_u64().unwrap() >= 2, "{}", w["summary"]);
+    assert!(w["summary"]["pages_read"].as_u64().unwrap() > 0 && w["summary"]["loaded_bytes"].as_u64().unwrap() > 0);
+    assert_refused(&review(&["--eyesight", "0"]), "--eyesight");
+    assert_refused(&review(&["--review-box", "0.5"]), "--review-box");
+    assert_refused(&hdov(&["walk", &s("db"), "--path", &s("walk.csv"), "--method", "spatial"]), "spatial");
     std::fs::write(s("bad.csv"), format!("{x},1.7,{z}\n{x},oops,{z}\n")).unwrap();
     assert_refused(&hdov(&["walk", &s("db"), "--path", &s("bad.csv")]), "bad.csv: line 2");
     std::fs::write(s("out.csv"), format!("{x},1.7,{z}\n{},1.7,{z}\n", x + 1e5)).unwrap();

@@ -127,6 +127,9 @@ fn flag_of(param: &str) -> &str {
         "tau" => "--tau",
         "camera" => "--look",
         "size" => "--size",
+        "review_box" => "--review-box",
+        "eyesight" => "--eyesight",
+        "fov" => "--fov",
         "scene" => "SCENE",
         other => other,
     }

@@ -8,7 +8,8 @@ use serde::Serialize;
 
 use super::args::parse_vec3;
 use hdov::error::{Error, Result};
-use hdov::query::{Camera, Mode};
+use hdov::query::{Camera, Method, Mode};
+use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
 use hdov_storage::{LayoutKind, PolicyKind};
 
@@ -33,9 +34,10 @@ pub struct QueryArgs {
     /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     look: Option<Vec3>,
-    /// Vertical field of view in degrees (with --look; vmsse without --look assumes 60).
-    #[arg(long, default_value_t = 60.0)]
-    fov: f32,
+    /// Field of view in degrees: vertical, with --look (default 60; vmsse without --look
+    /// assumes 60); `walk --method review`: horizontal and vertical (default 45).
+    #[arg(long)]
+    fov: Option<f32>,
     /// Image height in pixels of vmsse's screen errors (with --look; else 1080).
     #[arg(long, default_value_t = 1080)]
     image_height: u32,
@@ -43,7 +45,8 @@ pub struct QueryArgs {
 
 impl QueryArgs {
     fn params(&self) -> QueryParams {
-        let camera = Camera { fov_y_deg: self.fov, image_height: self.image_height, ..Camera::default() };
+        let camera =
+            Camera { fov_y_deg: self.fov.unwrap_or(60.0), image_height: self.image_height, ..Camera::default() };
         QueryParams {
             mode: self.mode,
             eta: self.eta,
@@ -134,7 +137,16 @@ pub struct WalkCmd {
     path: PathBuf,
     #[command(flatten)]
     query: QueryArgs,
-    /// Tree-page and V-page cache: none, lru, dov or dov-time.
+    /// visual (the HDoV-tree) or review (the spatial baseline: disk cells and CSearch).
+    #[arg(long, default_value = "visual")]
+    method: WalkMethod,
+    /// Review: the disk cell over the frustum cell, per axis (SF).
+    #[arg(long, default_value_t = review::DEFAULT_REVIEW_BOX)]
+    review_box: f32,
+    /// Review: the depth of the view frustum, in metres.
+    #[arg(long, default_value_t = review::DEFAULT_EYESIGHT)]
+    eyesight: f32,
+    /// Tree-page and V-page cache: none, lru, dov, dov-time or dplru.
     #[arg(long, default_value = "lru")]
     cache: PolicyKind,
     /// Cache capacity in pages.
@@ -151,6 +163,24 @@ pub struct WalkCmd {
     prefetch: bool,
     #[arg(long)]
     json: bool,
+}
+
+/// `hdov walk --method`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WalkMethod {
+    Visual,
+    Review,
+}
+
+impl std::str::FromStr for WalkMethod {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "visual" => Ok(WalkMethod::Visual),
+            "review" => Ok(WalkMethod::Review),
+            _ => Err(format!("unknown method '{s}' (visual, review)")),
+        }
+    }
 }
 
 /// A walk's totals.
@@ -173,7 +203,17 @@ pub(super) struct WalkSummary {
 pub fn walk(a: WalkCmd) -> Result<()> {
     let db = Database::open(&a.db)?;
     let path = read_path(&a.path)?;
+    let method = match a.method {
+        WalkMethod::Visual => Method::Visual,
+        WalkMethod::Review => Method::Review(ReviewParams {
+            review_box: a.review_box,
+            eyesight: a.eyesight,
+            fov_deg: a.query.fov.unwrap_or(review::DEFAULT_FOV_DEG),
+            ..ReviewParams::default()
+        }),
+    };
     let params = SessionParams {
+        method,
         query: a.query.params(),
         cache: a.cache,
         cache_pages: Some(a.cache_pages),

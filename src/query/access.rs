@@ -22,7 +22,8 @@ pub(crate) struct PageIo {
 /// A reader of one database through one layout.
 pub(crate) struct Access<'db> {
     db: &'db Database,
-    cursor: LayoutCursor<'db>,
+    /// `None` for a spatial reader (REVIEW), which reads tree pages only.
+    cursor: Option<LayoutCursor<'db>>,
     pages: PageReader,
 }
 
@@ -52,17 +53,34 @@ impl<'db> Access<'db> {
                 Error::bad_param("layout", format!("{} holds no visibility to query", db.dir().display()))
             })?,
         };
-        Ok(Access { db, cursor: db.layout(kind)?.cursor(), pages })
+        Ok(Access { db, cursor: Some(db.layout(kind)?.cursor()), pages })
     }
 
-    pub fn layout_kind(&self) -> LayoutKind {
-        self.cursor.layout().kind()
+    /// A reader of tree pages alone (no layout, so no visibility needed), through a cache of
+    /// `limits` under `policy`: what REVIEW's searches read through.
+    pub fn spatial(db: &'db Database, limits: CacheLimits, policy: PolicyKind) -> Access<'db> {
+        Access { db, cursor: None, pages: PageReader::new(limits, policy) }
+    }
+
+    /// The layout read ("none" for a spatial reader).
+    pub fn layout_name(&self) -> String {
+        self.cursor.as_ref().map_or_else(|| "none".to_string(), |c| c.layout().kind().to_string())
     }
 
     /// Selects the cell whose V-pages the next reads return (free if it is selected already).
     pub fn flip(&mut self, cell: u32) -> Result<()> {
-        self.cursor.flip_to_cell(cell, &mut self.pages)?;
+        let pages = &mut self.pages;
+        self.cursor
+            .as_mut()
+            .ok_or_else(|| Error::bad_param("layout", "a spatial reader reads no V-pages"))?
+            .flip_to_cell(cell, pages)?;
         Ok(())
+    }
+
+    /// Updates the cache's priority of node `id`'s page if it is resident (REVIEW's DPLRU
+    /// priorities follow the query cell); returns whether it was.
+    pub fn set_node_priority(&mut self, id: u32, priority: f64) -> bool {
+        self.pages.set_priority(self.db.tree_file(), u64::from(id), priority)
     }
 
     /// The page of node `id`; `priority` is its DoV (for the cache's policy).
@@ -72,14 +90,21 @@ impl<'db> Access<'db> {
 
     /// The V-page of `node` in the selected cell into `out`; false if the node is hidden there.
     pub fn vpage(&mut self, node: u32, priority: f64, out: &mut Vec<VEntry>) -> Result<bool> {
-        Ok(self.cursor.vpage_into(node, priority, &mut self.pages, out)?)
+        let pages = &mut self.pages;
+        let cursor =
+            self.cursor.as_mut().ok_or_else(|| Error::bad_param("layout", "a spatial reader reads no V-pages"))?;
+        Ok(cursor.vpage_into(node, priority, pages, out)?)
     }
 
     pub fn io(&self) -> PageIo {
-        let layout = self.cursor.layout();
+        let layout = self.cursor.as_ref().map(|c| c.layout());
         let of = |f: Option<&hdov_storage::PageFile>| f.map(|f| self.pages.file_io(f));
         let read = |io: &Option<FileIo>| io.as_ref().map_or(0, |i| i.pages_read);
-        let files = [of(Some(self.db.tree_file())), of(layout.index_file()), of(Some(layout.vpage_file()))];
+        let files = [
+            of(Some(self.db.tree_file())),
+            of(layout.and_then(|l| l.index_file())),
+            of(layout.map(|l| l.vpage_file())),
+        ];
         PageIo {
             tree: read(&files[0]),
             vindex: read(&files[1]),

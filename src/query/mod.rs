@@ -30,7 +30,7 @@ use crate::error::{Error, Result};
 use crate::geom::Aabb;
 pub use camera::Camera;
 use hdov_storage::LayoutKind;
-pub use session::{Session, SessionParams, Step};
+pub use session::{Method, Session, SessionParams, Step};
 
 /// DoV above which an object is drawn at full detail (thesis eq. 5.6): an object whose box does
 /// not hold the viewpoint covers at most half the sphere.
@@ -229,7 +229,7 @@ impl Database {
             cell_id,
             mode: params.mode,
             eta: params.eta,
-            layout: access.layout_kind().to_string(),
+            layout: access.layout_name(),
             items: out.items,
             stats,
             warnings,

@@ -4,6 +4,10 @@
 //! resident is not loaded again (instances share their base mesh's records, so one load serves
 //! them all); LODs the new cell no longer needs are evicted, oldest first, while resident
 //! geometry is over its byte budget.
+//!
+//! The same session runs REVIEW, the spatial baseline ([`Method::Review`], [`crate::review`]):
+//! disk cells instead of viewing cells, CSearch instead of the HDoV-tree, the same delta
+//! loading, resident geometry and [`Step`]s.
 
 use std::collections::HashMap;
 use std::time::Instant;
@@ -12,17 +16,33 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use super::access::Access;
-use super::{Answer, Item, QueryParams};
+use super::camera::distance_to_box;
+use super::{Answer, Item, QueryParams, QueryStats};
 use crate::db::Database;
 use crate::error::{Error, Result};
+use crate::review::{self, ReviewParams, ReviewState};
 use hdov_storage::{CacheLimits, PolicyKind};
 
 /// Steps ahead along the current motion that prefetch looks (one step is one path point).
 pub const PREFETCH_STEPS: f32 = 3.0;
 
+/// How a session finds what to load: the HDoV-tree (VISUAL) or the spatial baseline (REVIEW).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Method {
+    /// The HDoV-tree: on each cell flip, the query of `SessionParams::query` (thesis ch. 5).
+    #[default]
+    Visual,
+    /// REVIEW (thesis ch. 4, [`crate::review`]): disk cells, CSearch, the R-tree alone; the
+    /// query's mode, η and layout are not used, nor the viewing grid (steps report its cell
+    /// where the viewpoint lies in it).
+    Review(ReviewParams),
+}
+
 /// How a session runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SessionParams {
+    /// VISUAL (the default) or REVIEW.
+    pub method: Method,
     /// The query each cell flip runs (its camera's look is replaced per step when a step
     /// gives one).
     pub query: QueryParams,
@@ -40,6 +60,7 @@ pub struct SessionParams {
 impl Default for SessionParams {
     fn default() -> Self {
         Self {
+            method: Method::Visual,
             query: QueryParams::default(),
             cache: PolicyKind::Lru,
             cache_pages: Some(256),
@@ -105,6 +126,8 @@ pub struct Session<'db> {
     resident: HashMap<u64, Resident>,
     resident_bytes: u64,
     steps: u64,
+    /// REVIEW's disk cells, history and object buffer (`None` for VISUAL).
+    review: Option<ReviewState>,
 }
 
 impl Database {
@@ -114,10 +137,18 @@ impl Database {
             cam.check().map_err(|r| Error::bad_param("camera", r))?;
         }
         let limits = CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
+        let (access, review) = match params.method {
+            Method::Visual => (Access::cached(self, params.query.layout, limits, params.cache)?, None),
+            Method::Review(r) => {
+                r.check().map_err(|(param, reason)| Error::bad_param(param, reason))?;
+                (Access::spatial(self, limits, params.cache), Some(ReviewState::new(self, r)))
+            }
+        };
         Ok(Session {
             db: self,
             params: *params,
-            access: Access::cached(self, params.query.layout, limits, params.cache)?,
+            access,
+            review,
             answer: None,
             last_at: None,
             resident: HashMap::new(),
@@ -133,6 +164,20 @@ impl<'db> Session<'db> {
     /// session as it was.
     pub fn step(&mut self, at: Vec3, look: Option<Vec3>) -> Result<Step> {
         let start = Instant::now();
+        let mut step = if self.review.is_some() { self.review_step(at, look)? } else { self.visual_step(at)? };
+        let items = self.frame_items(at, look);
+        step.items = items.len() as u64;
+        step.faces = items.iter().map(|i| u64::from(i.faces)).sum();
+        step.resident = self.resident.len() as u64;
+        step.resident_bytes = self.resident_bytes;
+        step.micros = start.elapsed().as_micros() as u64;
+        self.last_at = Some(at);
+        self.steps += 1;
+        Ok(step)
+    }
+
+    /// VISUAL: a cell flip queries the HDoV-tree; prefetch queries the cell ahead.
+    fn visual_step(&mut self, at: Vec3) -> Result<Step> {
         let (cell, cell_id) = self.db.locate(at)?;
         let flipped = self.answer.as_ref().is_none_or(|a| a.cell_id != cell_id);
         let mut step = Step { step: self.steps, at: at.to_array(), cell, flipped, ..Default::default() };
@@ -151,20 +196,134 @@ impl<'db> Session<'db> {
         if self.params.prefetch {
             step.prefetch_pages = self.prefetch(at, cell_id)?;
         }
-        let items = self.frame_items(at, look);
-        step.items = items.len() as u64;
-        step.faces = items.iter().map(|i| u64::from(i.faces)).sum();
-        step.resident = self.resident.len() as u64;
-        step.resident_bytes = self.resident_bytes;
-        step.micros = start.elapsed().as_micros() as u64;
-        self.last_at = Some(at);
-        self.steps += 1;
         Ok(step)
     }
 
+    /// The direction the viewer looks: the step's, else the session camera's.
+    fn look(&self, look: Option<Vec3>) -> Option<Vec3> {
+        look.or(self.params.query.camera.map(|c| c.look))
+    }
+
+    /// REVIEW: when the frustum cell leaves the disk cell, CSearch the new disk cell against
+    /// the history and delta-load the object buffer's part in it; prefetch the predicted cell
+    /// when the next step's frustum cell would leave the disk cell.
+    fn review_step(&mut self, at: Vec3, look: Option<Vec3>) -> Result<Step> {
+        if !at.is_finite() {
+            return Err(Error::bad_param("at", format!("{:?} is not a finite point", at.to_array())));
+        }
+        let grid_cell = self.db.grid().and_then(|g| g.cell_of(at).map(|c| (c, g.cell_id(c) as u32)));
+        let (cell, cell_id) = grid_cell.unwrap_or_default();
+        let mut step = Step { step: self.steps, at: at.to_array(), cell, ..Default::default() };
+        let look = self.look(look);
+        let db = self.db;
+        let r = self.review.as_mut().expect("a review session");
+        let view = review::frustum_cell(at, look, &r.params);
+        if !r.cell.is_some_and(|c| c.contains(&view)) {
+            let disk = review::disk_cell(&view, r.params.review_box);
+            step.flipped = true;
+            r.history.retain(|h| h.intersects(&disk));
+            self.access.reset_io();
+            // DPLRU: the cached tree pages' priorities follow the new cell.
+            let read: Vec<u32> = r.read.iter().copied().collect();
+            for id in read {
+                if !self.access.set_node_priority(id, r.priority(db, id, &disk)) {
+                    r.read.remove(&id);
+                }
+            }
+            let (found, nodes) = review::search_through(db, &mut self.access, r, &disk)?;
+            for e in found {
+                r.buffer.entry(e.child).or_insert_with(|| review::object_item(db, e.child, e.mbr));
+            }
+            let items: Vec<Item> = r.buffer.values().filter(|i| i.mbr.intersects(&disk)).cloned().collect();
+            let io = self.access.io();
+            step.pages_read = io.tree;
+            step.hits = io.hits;
+            step.misses = io.requested - io.hits;
+            let cache = self.access.cache_stats();
+            (step.cache_requests, step.cache_hits) = (cache.requests, cache.hits);
+            let stats = QueryStats {
+                tree_pages: io.tree,
+                pages_read: io.tree,
+                pages_requested: io.requested,
+                page_hits: io.hits,
+                nodes_visited: nodes,
+                faces: items.iter().map(|i| u64::from(i.faces)).sum(),
+                ..QueryStats::default()
+            };
+            let q = &self.params.query;
+            self.answer = Some(Answer {
+                at: step.at,
+                cell,
+                cell_id,
+                mode: q.mode,
+                eta: q.eta,
+                layout: "review".into(),
+                items,
+                stats,
+                warnings: Vec::new(),
+            });
+            self.delta_load(&mut step)?;
+            // What delta loading evicted leaves the buffer; then only the new cell's objects
+            // are known to be all there, so the history restarts from it.
+            let r = self.review.as_mut().expect("a review session");
+            let before = r.buffer.len();
+            let resident = &self.resident;
+            r.buffer.retain(|_, i| resident.contains_key(&i.lod_ref.offset));
+            if r.buffer.len() < before {
+                r.history.clear();
+            }
+            r.history.push(disk);
+            if r.history.len() > review::HISTORY_MAX {
+                r.history.remove(0);
+            }
+            r.cell = Some(disk);
+            r.prefetched = None;
+        }
+        if self.params.prefetch {
+            step.prefetch_pages = self.review_prefetch(at, look)?;
+        }
+        Ok(step)
+    }
+
+    /// REVIEW's prefetch (thesis §4.2.5): once per disk cell, when the next step at the
+    /// current velocity would take the frustum cell out of it, CSearch the cell around
+    /// `F + k·velocity` against the history, reading its tree pages into the cache (no
+    /// geometry). Returns pages read.
+    fn review_prefetch(&mut self, at: Vec3, look: Option<Vec3>) -> Result<u64> {
+        let Some(last) = self.last_at else { return Ok(0) };
+        let db = self.db;
+        let r = self.review.as_mut().expect("a review session");
+        let Some(cell) = r.cell else { return Ok(0) };
+        let velocity = at - last;
+        if r.prefetched.is_some() || velocity == Vec3::ZERO {
+            return Ok(0);
+        }
+        if cell.contains(&review::frustum_cell(at + velocity, look, &r.params)) {
+            return Ok(0);
+        }
+        let next = review::predicted_cell(at, look, velocity, cell.extent(), &r.params);
+        let before = self.access.io().tree;
+        review::search_through(db, &mut self.access, r, &next)?;
+        r.prefetched = Some(next);
+        Ok(self.access.io().tree - before)
+    }
+
     /// The items to draw from `at` looking along `look`: the cell's answer culled to the view.
+    /// REVIEW culls the object buffer's part in the disk cell to its own frustum (`fov_deg`
+    /// both ways) and to the eyesight.
     pub fn frame_items(&self, at: Vec3, look: Option<Vec3>) -> Vec<&Item> {
         let Some(answer) = &self.answer else { return Vec::new() };
+        if let Some(r) = &self.review {
+            let eyesight = r.params.eyesight;
+            let near = |i: &&Item| distance_to_box(at, &i.mbr) <= eyesight;
+            return match self.look(look).map(|l| r.params.camera(l)).filter(|c| c.check().is_ok()) {
+                Some(cam) => {
+                    let f = cam.frustum(at);
+                    answer.items.iter().filter(|i| f.meets(&i.mbr)).filter(near).collect()
+                }
+                None => answer.items.iter().filter(near).collect(),
+            };
+        }
         let camera = match (look, self.params.query.camera) {
             (Some(look), cam) => Some(super::Camera { look, ..cam.unwrap_or_default() }),
             (None, cam) => cam,

@@ -4,11 +4,12 @@
 
 use std::sync::Arc;
 
-use hdov_storage::cache::{DEFAULT_KAPPA, DovTime};
+use hdov_storage::cache::{DEFAULT_GAMMA, DEFAULT_KAPPA, DovTime, Dplru};
 use hdov_storage::{CacheLimits, CachePolicy, CacheStats, Error, PageCache, PageKey, PolicyKind};
 use proptest::prelude::*;
 
-const ALL: [PolicyKind; 4] = [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DOV_TIME];
+const ALL: [PolicyKind; 5] =
+    [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DOV_TIME, PolicyKind::Dplru];
 
 fn key(page: u64) -> PageKey {
     PageKey { file: 0, page }
@@ -317,6 +318,47 @@ fn file_ids_keep_pages_of_different_files_apart() {
     assert_eq!((cache.len(), cache.bytes(), cache.stats().misses), (2, 9, 2));
 }
 
+/// DPLRU on hand-made sequences through a two-page cache, γ = 1/3. Request i happens at time
+/// i; when the third page arrives the residents were last accessed at 1, 2, 3, so the largest
+/// age is 2 and `pl` = 1 − age/2 is 0, ½, 1 for them.
+#[test]
+fn dplru_evicts_the_smallest_priority_plus_normalised_recency() {
+    let third = 1.0 / 3.0;
+    // A (0.40, t1): f = 0.40 + ⅓·0 = 0.400;  B (0.30, t2): 0.30 + ⅓·½ = 0.467;
+    // C (0.35, t3): 0.35 + ⅓·1 = 0.683. A goes: LRU's victim, where DoV would drop B.
+    let mut cache = PageCache::with_kind(CacheLimits::max_pages(2), PolicyKind::Dplru);
+    for (p, prio) in [(1, 0.40), (2, 0.30), (3, 0.35)] {
+        request(&mut cache, p, prio);
+    }
+    assert_eq!(resident(&cache, 1..=3), [2, 3]);
+    let f = |prio: f64, last: u64| Dplru::default().f(prio, last, 1, 3);
+    assert!((f(0.40, 1) - 0.40).abs() < 1e-12 && (f(0.30, 2) - (0.30 + third / 2.0)).abs() < 1e-12);
+    // A (0.90, t1): 0.900;  B (0.30, t2): 0.467;  C (0.35, t3): 0.683. B goes: DoV's victim,
+    // where LRU would drop A.
+    let mut cache = PageCache::with_kind(CacheLimits::max_pages(2), PolicyKind::Dplru);
+    for (p, prio) in [(1, 0.90), (2, 0.30), (3, 0.35)] {
+        request(&mut cache, p, prio);
+    }
+    assert_eq!(resident(&cache, 1..=3), [1, 3]);
+    // Then D (0.10, t4): A (0.90, t1) age 3 → 0.900; C (0.35, t3) age 1 → 0.35 + ⅓·⅔ = 0.572;
+    // D (0.10, t4) → 0.10 + ⅓ = 0.433: the newcomer itself is the smallest and is not kept.
+    assert!(!request(&mut cache, 4, 0.10));
+    assert_eq!(resident(&cache, 1..=4), [1, 3]);
+    assert_eq!(cache.stats().evictions, 2);
+    // A hit refreshes C (t5); the caller lowers A's priority (the viewer walked away from its
+    // node): A (0.05, t1) → 0.05, C (0.35, t5) → 0.683, E (0.20, t6) → 0.533. A goes.
+    assert!(request(&mut cache, 3, 0.35));
+    assert!(cache.set_priority(key(1), 0.05));
+    request(&mut cache, 5, 0.20);
+    assert_eq!(resident(&cache, 1..=5), [3, 5]);
+    // Equal f: the least recent goes. Page 1 (⅔, t1) → ⅔ + ⅓·0; page 2 (⅓, t2) → ⅓ + ⅓·1.
+    let mut one = PageCache::with_kind(CacheLimits::max_pages(1), PolicyKind::Dplru);
+    request(&mut one, 1, 2.0 * third);
+    request(&mut one, 2, third);
+    assert_eq!(resident(&one, 1..=2), [2], "page 1 ties on f and is older");
+    assert_eq!(Dplru::default().gamma(), DEFAULT_GAMMA);
+}
+
 #[test]
 fn the_cache_can_move_between_threads() {
     fn send<T: Send>(_: &T) {}
@@ -334,7 +376,7 @@ fn policy_names_round_trip() {
     assert_eq!("dov-time:0.01".parse(), Ok(PolicyKind::DovTime { kappa: 0.01 }));
     assert_eq!("dov-time:0.01".parse::<PolicyKind>().unwrap().name(), "dov-time");
     let err = "mru".parse::<PolicyKind>().unwrap_err();
-    assert_eq!(err, r#"unknown cache policy "mru" (none, lru, dov, dov-time)"#);
+    assert_eq!(err, r#"unknown cache policy "mru" (none, lru, dov, dov-time, dplru)"#);
     assert!("dov-time:-1".parse::<PolicyKind>().unwrap_err().contains("kappa"));
     assert!("dov-time:nan".parse::<PolicyKind>().is_err());
 }
@@ -411,11 +453,17 @@ struct Model {
 }
 
 impl Model {
-    fn score(kind: PolicyKind, priority: f64, last: u64) -> f64 {
+    /// `oldest` and `newest`: the least and most recent last access among the residents.
+    fn score(kind: PolicyKind, priority: f64, last: u64, oldest: u64, newest: u64) -> f64 {
         match kind {
             PolicyKind::None | PolicyKind::Lru => 0.0,
             PolicyKind::Dov => priority,
             PolicyKind::DovTime { kappa } => priority + kappa * last as f64,
+            PolicyKind::Dplru => {
+                let span = newest - oldest;
+                let pl = if span == 0 { 1.0 } else { 1.0 - (newest - last) as f64 / span as f64 };
+                priority + DEFAULT_GAMMA * pl
+            }
         }
     }
 
@@ -439,11 +487,14 @@ impl Model {
         }
         self.resident.push((k, priority, self.now));
         while limits.pages.is_some_and(|p| self.resident.len() > p) || limits.bytes.is_some_and(|b| self.bytes() > b) {
+            let oldest = self.resident.iter().map(|e| e.2).min().unwrap();
+            let newest = self.resident.iter().map(|e| e.2).max().unwrap();
             let worst = (0..self.resident.len())
                 .min_by(|&i, &j| {
                     let (ki, pi, li) = self.resident[i];
                     let (kj, pj, lj) = self.resident[j];
-                    let (si, sj) = (Self::score(kind, pi, li), Self::score(kind, pj, lj));
+                    let score = |p, l| Self::score(kind, p, l, oldest, newest);
+                    let (si, sj) = (score(pi, li), score(pj, lj));
                     si.total_cmp(&sj).then(li.cmp(&lj)).then(ki.cmp(&kj))
                 })
                 .unwrap();
@@ -536,7 +587,7 @@ proptest! {
         ops in prop::collection::vec(op(), 0..120),
     ) {
         let limits = CacheLimits { pages, bytes };
-        for kind in [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DovTime { kappa }] {
+        for kind in [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DovTime { kappa }, PolicyKind::Dplru] {
             run_against_model(kind, limits, &ops)?;
         }
     }

@@ -29,12 +29,14 @@ use std::sync::Arc;
 
 mod dov;
 mod dov_time;
+mod dplru;
 mod lru;
 mod none;
 mod ranked;
 
 pub use dov::Dov;
 pub use dov_time::{DEFAULT_KAPPA, DovTime};
+pub use dplru::{DEFAULT_GAMMA, Dplru};
 pub use lru::Lru;
 pub use none::NoCache;
 
@@ -140,11 +142,14 @@ pub enum PolicyKind {
         /// Weight of recency against priority (thesis: 0.001 per request).
         kappa: f64,
     },
+    /// REVIEW's distance-priority-LRU: evict the page of smallest `priority + γ·pl`, the
+    /// caller's `α·pp + β·pd` plus the normalised recency (γ = 1/3; [`Dplru`]).
+    Dplru,
 }
 
 impl PolicyKind {
     /// Every name [`FromStr`] accepts (`dov-time` also as `dov-time:KAPPA`).
-    pub const NAMES: [&'static str; 4] = ["none", "lru", "dov", "dov-time"];
+    pub const NAMES: [&'static str; 5] = ["none", "lru", "dov", "dov-time", "dplru"];
 
     /// DoV-Time with the thesis's κ = 0.001.
     pub const DOV_TIME: PolicyKind = PolicyKind::DovTime { kappa: DEFAULT_KAPPA };
@@ -156,6 +161,7 @@ impl PolicyKind {
             PolicyKind::Lru => "lru",
             PolicyKind::Dov => "dov",
             PolicyKind::DovTime { .. } => "dov-time",
+            PolicyKind::Dplru => "dplru",
         }
     }
 
@@ -166,6 +172,7 @@ impl PolicyKind {
             PolicyKind::Lru => Box::<Lru>::default(),
             PolicyKind::Dov => Box::<Dov>::default(),
             PolicyKind::DovTime { kappa } => Box::new(DovTime::new(kappa)),
+            PolicyKind::Dplru => Box::<Dplru>::default(),
         }
     }
 }
@@ -188,12 +195,13 @@ impl FromStr for PolicyKind {
             "lru" => Ok(PolicyKind::Lru),
             "dov" => Ok(PolicyKind::Dov),
             "dov-time" => Ok(PolicyKind::DOV_TIME),
+            "dplru" => Ok(PolicyKind::Dplru),
             _ => match s.strip_prefix("dov-time:") {
                 Some(k) => match k.parse::<f64>() {
                     Ok(kappa) if kappa.is_finite() && kappa >= 0.0 => Ok(PolicyKind::DovTime { kappa }),
                     _ => Err(format!("cache policy {s:?}: kappa must be a finite number >= 0")),
                 },
-                None => Err(format!("unknown cache policy {s:?} (none, lru, dov, dov-time)")),
+                None => Err(format!("unknown cache policy {s:?} (none, lru, dov, dov-time, dplru)")),
             },
         }
     }
