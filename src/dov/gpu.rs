@@ -402,21 +402,10 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
             compilation_options: Default::default(),
             buffers: &[Some(Vertex::layout())],
         },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            front_face: wgpu::FrontFace::Ccw,
-            // Both sides are drawn: back faces are visible surfaces too (and flagged).
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            // Reverse Z: larger is nearer. Equal depth: the later draw (lower id) wins.
-            depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
-            stencil: wgpu::StencilState::default(),
-            bias: wgpu::DepthBiasState::default(),
-        }),
+        // Back faces are visible surfaces too (and flagged); at equal depth the later draw
+        // (lower id) wins.
+        primitive: crate::gfx::two_sided_triangles(),
+        depth_stencil: Some(crate::gfx::reverse_z_depth()),
         multisample: wgpu::MultisampleState::default(),
         fragment: Some(wgpu::FragmentState {
             module: &shader,

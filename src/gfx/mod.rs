@@ -216,6 +216,29 @@ impl Gpu {
     }
 }
 
+/// Triangle lists drawn from both sides (counter-clockwise is the front): a back face is a
+/// visible surface too, and open or inverted meshes still cover their pixels.
+pub fn two_sided_triangles() -> wgpu::PrimitiveState {
+    wgpu::PrimitiveState {
+        topology: wgpu::PrimitiveTopology::TriangleList,
+        front_face: wgpu::FrontFace::Ccw,
+        cull_mode: None,
+        ..Default::default()
+    }
+}
+
+/// Reverse-Z depth testing into a `Depth32Float` buffer: larger is nearer, and at an exact tie
+/// the later draw wins (so draw order decides coplanar faces the same way every time).
+pub fn reverse_z_depth() -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: wgpu::TextureFormat::Depth32Float,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
+        stencil: wgpu::StencilState::default(),
+        bias: wgpu::DepthBiasState::default(),
+    }
+}
+
 /// Bytes per row of a `width`-texel copy of `texel_bytes`-byte texels, padded to wgpu's copy
 /// alignment.
 pub fn padded_row_bytes(width: u32, texel_bytes: u32) -> u32 {

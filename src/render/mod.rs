@@ -573,21 +573,8 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
                 }),
             ],
         },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            front_face: wgpu::FrontFace::Ccw,
-            // Two-sided: an open or inverted mesh still covers its pixels.
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            // Reverse Z: larger is nearer; at an exact tie the later draw wins.
-            depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
-            stencil: wgpu::StencilState::default(),
-            bias: wgpu::DepthBiasState::default(),
-        }),
+        primitive: crate::gfx::two_sided_triangles(),
+        depth_stencil: Some(crate::gfx::reverse_z_depth()),
         multisample: wgpu::MultisampleState::default(),
         fragment: Some(wgpu::FragmentState {
             module: &shader,
