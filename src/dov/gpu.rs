@@ -153,19 +153,7 @@ impl GpuBackend {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("dov face"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FaceUniform>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let bind_layout = crate::gfx::uniform_layout::<FaceUniform>(device, "dov face", wgpu::ShaderStages::VERTEX);
         let face_bind_groups = (0..FACE_COUNT as u64)
             .map(|f| {
                 device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -216,6 +216,23 @@ impl Gpu {
     }
 }
 
+/// A bind group layout of one uniform buffer of `T` at binding 0, seen by `visibility`.
+pub fn uniform_layout<T>(device: &wgpu::Device, label: &str, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &[wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
+            },
+            count: None,
+        }],
+    })
+}
+
 /// Triangle lists drawn from both sides (counter-clockwise is the front): a back face is a
 /// visible surface too, and open or inverted meshes still cover their pixels.
 pub fn two_sided_triangles() -> wgpu::PrimitiveState {

@@ -309,19 +309,8 @@ impl Renderer {
         let gpu = Gpu::open("hdov render")?;
         let device = &gpu.device;
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render view"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let bind_layout =
+            crate::gfx::uniform_layout::<ViewUniform>(device, "render view", wgpu::ShaderStages::VERTEX_FRAGMENT);
         let pipeline = create_pipeline(device, &bind_layout);
         if let Some(e) = pollster::block_on(validation.pop()) {
             return Err(Error::Gpu(format!("{}: setting up the renderer: {e}", gpu.adapter_name)));
