@@ -519,3 +519,42 @@ fn render_writes_a_png_and_reports_fidelity() {
     let reader = png::Decoder::new(std::fs::File::open(s("pair.png")).unwrap()).read_info().unwrap();
     assert_eq!(reader.info().width, 64 * 2 + 4);
 }
+
+/// `hdov walk --fidelity` adds PSNR and coverage difference against full detail to each step
+/// with a view direction, and none to a step without one.
+#[test]
+fn walk_reports_fidelity_per_step_with_a_look() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", &s("city")]).status.success());
+    let o = hdov(&["build", &s("city/city.json"), "--out", &s("db"), "--resolution", "16", "--backend", "cpu"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", &s("db"), "--json"]).stdout).unwrap();
+    let r = &info["grid"]["region"];
+    let (x, z) = (r[0].as_f64().unwrap() + 5.0, r[2].as_f64().unwrap() + 8.0);
+    let mut path: String = (0..4).map(|k| format!("{},1.7,{z},1,0,0\n", x + 8.0 * k as f64)).collect();
+    path += &format!("{x},1.7,{z}\n");
+    std::fs::write(s("walk.csv"), path).unwrap();
+    assert_refused(&hdov(&["walk", &s("db"), "--path", &s("walk.csv"), "--fidelity", "--size", "0x9"]), "--size");
+    if hdov::gfx::adapter_available().is_none() {
+        println!("skipped: no graphics adapter");
+        return;
+    }
+    for method in ["visual", "review"] {
+        let (db, walk) = (s("db"), s("walk.csv"));
+        let args = ["walk", &db, "--path", &walk, "--method", method, "--fidelity", "--size", "64x40", "--json"];
+        let o = hdov(&args);
+        assert!(o.status.success(), "{method}: {}", stderr(&o));
+        let w: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let steps = w["steps"].as_array().unwrap();
+        assert_eq!(steps.len(), 5);
+        for st in &steps[..4] {
+            // PSNR is null in JSON where the images are equal (+∞).
+            let psnr = st["psnr"].as_f64().unwrap_or(f64::INFINITY);
+            assert!(psnr >= 0.0 && st.get("psnr").is_some(), "{method}: {st}");
+            let c = st["coverage_diff"].as_f64().unwrap();
+            assert!((0.0..=1.0).contains(&c), "{method}: {st}");
+        }
+        assert!(steps[4].get("psnr").is_none() && steps[4].get("coverage_diff").is_none(), "{}", steps[4]);
+    }
+}

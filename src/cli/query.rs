@@ -6,9 +6,10 @@ use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
 
-use super::args::parse_vec3;
+use super::args::{parse_dims, parse_vec3};
 use hdov::error::{Error, Result};
 use hdov::query::{Camera, Method, Mode};
+use hdov::render::View;
 use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
 use hdov_storage::{LayoutKind, PolicyKind};
@@ -161,6 +162,13 @@ pub struct WalkCmd {
     /// Query the cell ahead along the motion, so its pages are cached on arrival.
     #[arg(long)]
     prefetch: bool,
+    /// At each step with a view direction, render full detail and the drawn answer from the
+    /// step's camera and report PSNR and coverage difference (needs a graphics adapter).
+    #[arg(long)]
+    fidelity: bool,
+    /// --fidelity: image size WxH in pixels.
+    #[arg(long, default_value = "320x200", value_parser = parse_dims::<2>, requires = "fidelity")]
+    size: [u32; 2],
     #[arg(long)]
     json: bool,
 }
@@ -222,14 +230,21 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         prefetch: a.prefetch,
     };
     let mut session = db.session(&params)?;
+    let renderer = if a.fidelity { Some(super::render::open_renderer()?) } else { None };
     let mut steps: Vec<Step> = Vec::with_capacity(path.len());
     for (line, at, look) in path {
-        let step = session.step(at, look).map_err(|e| match e {
+        let mut step = session.step(at, look).map_err(|e| match e {
             Error::BadParam { param, reason } if param == "at" => {
                 Error::bad_file(&a.path, format!("line {line}: {reason}"))
             }
             e => e,
         })?;
+        if let (Some(renderer), Some(look)) = (&renderer, look.or(a.query.look)) {
+            let view = fidelity_view(method, a.query.fov, at, look, a.size);
+            view.check()?;
+            let f = session.fidelity(renderer, &view)?;
+            (step.psnr, step.coverage_diff) = (Some(f.psnr), Some(f.coverage_diff));
+        }
         steps.push(step);
     }
     let summary = summarise(&steps);
@@ -240,7 +255,7 @@ pub fn walk(a: WalkCmd) -> Result<()> {
     }
     for s in &steps {
         println!(
-            "step {:>4} cell {:?}{} items {:>5} faces {:>9} pages {:>4} hits {:>4} loaded {:>3} ({:>9} B) evicted {:>3} resident {:>10} B {:>6} µs",
+            "step {:>4} cell {:?}{} items {:>5} faces {:>9} pages {:>4} hits {:>4} loaded {:>3} ({:>9} B) evicted {:>3} resident {:>10} B {:>6} µs{}",
             s.step,
             s.cell,
             if s.flipped { " flip" } else { "     " },
@@ -252,11 +267,30 @@ pub fn walk(a: WalkCmd) -> Result<()> {
             s.loaded_bytes,
             s.evicted,
             s.resident_bytes,
-            s.micros
+            s.micros,
+            match (s.psnr, s.coverage_diff) {
+                (Some(p), Some(c)) => format!("  PSNR {p:.1} dB coverage diff {c:.4}"),
+                _ => String::new(),
+            }
         );
     }
     print_summary(&summary);
     Ok(())
+}
+
+/// The camera `hdov walk --fidelity` renders a step from: VISUAL's vertical field of view
+/// (`fov`, default 60°); REVIEW's, narrowed so that the image's horizontal field of view is
+/// REVIEW's own (`fov`, default 45°, both ways) and nothing at the image's edges was culled.
+fn fidelity_view(method: Method, fov: Option<f32>, at: Vec3, look: Vec3, size: [u32; 2]) -> View {
+    let aspect = size[0] as f32 / size[1].max(1) as f32;
+    let fov_y = match method {
+        Method::Visual => fov.unwrap_or(60.0),
+        Method::Review(r) => {
+            let h = fov.unwrap_or(r.fov_deg).to_radians();
+            (2.0 * ((h / 2.0).tan() / aspect.max(1.0)).atan()).to_degrees()
+        }
+    };
+    View::new(at, look, fov_y, size[0], size[1])
 }
 
 pub(super) fn print_summary(summary: &WalkSummary) {

@@ -20,6 +20,8 @@ use super::camera::distance_to_box;
 use super::{Answer, Item, QueryParams, QueryStats};
 use crate::db::Database;
 use crate::error::{Error, Result};
+use crate::render::fidelity::{self, Fidelity};
+use crate::render::{ColorMode, Image, Renderer, View};
 use crate::review::{self, ReviewParams, ReviewState};
 use hdov_storage::{CacheLimits, PolicyKind};
 
@@ -106,6 +108,13 @@ pub struct Step {
     /// The cell's answer needs more geometry than the resident budget holds.
     pub over_budget: bool,
     pub micros: u64,
+    /// With `hdov walk --fidelity`: PSNR in dB of the drawn answer against full detail from
+    /// the step's camera (`null` in JSON when the images are equal), and the share of pixels
+    /// whose coverage differs ([`crate::render::fidelity`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psnr: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage_diff: Option<f64>,
 }
 
 /// A resident LOD record.
@@ -335,6 +344,39 @@ impl<'db> Session<'db> {
             }
             None => answer.items.iter().collect(),
         }
+    }
+
+    /// The fidelity of what the session draws from `view` (the cell's answer culled as
+    /// [`Session::frame_items`] culls it from `view.eye` looking along `view.look`) against
+    /// full detail from the same view, both shaded. For a fair number the view should lie
+    /// inside the session's own frustum (REVIEW: `fov_deg` both ways), else the objects it
+    /// culled at the image's edges count as differences.
+    pub fn fidelity(&self, renderer: &Renderer, view: &View) -> Result<Fidelity> {
+        let image = self.draw(renderer, view)?;
+        let full = renderer.render_full(self.db, view, ColorMode::Shaded)?;
+        Ok(fidelity::compare(&image, &full))
+    }
+
+    /// What the session draws from `view`, shaded: the cell's answer culled as
+    /// [`Session::frame_items`] culls it from `view.eye` looking along `view.look`. Errors
+    /// before the first step.
+    pub fn draw(&self, renderer: &Renderer, view: &View) -> Result<Image> {
+        let Some(a) = &self.answer else {
+            return Err(Error::bad_param("fidelity", "the session has taken no step yet"));
+        };
+        let items: Vec<Item> = self.frame_items(view.eye, Some(view.look)).into_iter().cloned().collect();
+        let drawn = Answer {
+            at: a.at,
+            cell: a.cell,
+            cell_id: a.cell_id,
+            mode: a.mode,
+            eta: a.eta,
+            layout: a.layout.clone(),
+            items,
+            stats: a.stats,
+            warnings: Vec::new(),
+        };
+        renderer.render_answer(self.db, &drawn, view, ColorMode::Shaded)
     }
 
     /// The current cell's answer.
