@@ -48,6 +48,35 @@ fn round_trip_mmap_and_pread() {
     }
 }
 
+/// A page is checked on its first read in both modes; after that a mapped page is trusted (the
+/// file is immutable) while a page read with `pread` comes from the disk, and is checked, anew.
+#[test]
+fn damage_after_open_is_caught_on_first_read_and_on_every_pread() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("p");
+    write_sample(&path, 128, &sample_pages(124));
+    let damage_page = |n: u64| {
+        let mut b = fs::read(&path).unwrap();
+        b[((n + 1) * 128 + 5) as usize] ^= 0x40;
+        fs::write(&path, &b).unwrap();
+    };
+    for mode in [ReadMode::Mmap, ReadMode::Pread] {
+        write_sample(&path, 128, &sample_pages(124));
+        let f = PageFile::open(&path, KIND, mode).unwrap();
+        let mut r = PageReader::uncached();
+        r.page(&f, 0, 0.0).unwrap();
+        // Page 1, never read before, is damaged after open: its first read refuses it.
+        damage_page(1);
+        assert!(matches!(r.page(&f, 1, 0.0), Err(Error::Checksum { page: 1, .. })), "{mode:?}");
+        if mode == ReadMode::Pread {
+            // A pread page that read cleanly once is checked again on the next read.
+            damage_page(0);
+            r.reset_io();
+            assert!(matches!(r.page(&f, 0, 0.0), Err(Error::Checksum { page: 0, .. })));
+        }
+    }
+}
+
 #[test]
 fn empty_file_opens_with_no_pages() {
     let dir = tempfile::tempdir().unwrap();
