@@ -44,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for m in FANOUTS {
         let dir = cache.join(format!("{scale}-r{resolution}-m{m}.hdov"));
         let db = match Database::open(&dir) {
-            Ok(db) if db.manifest().build.fanout == Some(m) => db,
+            Ok(db) if db.manifest().tree.max_entries == m as usize => db,
             _ => {
                 eprintln!("building {}", dir.display());
                 let params = BuildParams {
