@@ -113,6 +113,11 @@ impl ViewGrid {
         Some(c)
     }
 
+    /// The centre of every cell, by cell id.
+    pub fn cell_centres(&self) -> Vec<Vec3> {
+        (0..self.cell_count()).map(|id| self.cell_box(self.cell_coords(id)).center()).collect()
+    }
+
     pub fn cell_box(&self, c: [u32; 3]) -> Aabb {
         let s = self.cell_size();
         let min = self.region.min + UVec3::from(c).as_vec3() * s;

@@ -35,8 +35,7 @@ fn build(scene: &Scene, dir: &Path, fanout: u32) -> Database {
 
 /// One viewpoint in the middle of every cell.
 fn cell_centres(db: &Database) -> Vec<Vec3> {
-    let g = db.grid().unwrap();
-    (0..g.cell_count()).map(|c| g.cell_box(g.cell_coords(c)).center()).collect()
+    db.grid().unwrap().cell_centres()
 }
 
 fn q(mode: Mode, eta: f64) -> QueryParams {

@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         let info = db.info()?;
         let grid = *db.grid().ok_or("no grid")?;
-        let centres: Vec<_> = (0..grid.cell_count()).map(|c| grid.cell_box(grid.cell_coords(c)).center()).collect();
+        let centres = grid.cell_centres();
         let n = centres.len() as f64;
         let mean = |p: &QueryParams| -> Result<(f64, f64, f64), hdov::Error> {
             let (mut faces, mut pages, mut nodes) = (0.0, 0.0, 0.0);
@@ -73,24 +73,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let naive = mean(&QueryParams { mode: Mode::Naive, ..Default::default() })?;
         let per_eta: Vec<_> =
             ETAS.iter().map(|&eta| mean(&QueryParams { eta, ..Default::default() })).collect::<Result<_, _>>()?;
-        let bytes = |k: &str| info.layouts.get(k).map_or(0, |l| l.bytes);
+        let bytes = ["horizontal", "vertical", "indexed-vertical"].map(|k| info.layouts.get(k).map_or(0, |l| l.bytes));
+        let (nodes, height) = (info.nodes, info.tree.height);
         println!(
-            "| {m} | {} | {} | {} / {} / {} | {:.1} | {} |",
-            info.nodes,
-            info.tree.height,
-            bytes("horizontal"),
-            bytes("vertical"),
-            bytes("indexed-vertical"),
+            "| {m} | {nodes} | {height} | {} | {:.1} | {} |",
+            bytes.map(|b| b.to_string()).join(" / "),
             naive.1,
             per_eta.iter().map(|(f, p, _)| format!("{f:.0}, {p:.1}")).collect::<Vec<_>>().join(" | ")
         );
         rows.push(format!(
-            "{m},{},{},{},{},{},{:.2},{}",
-            info.nodes,
-            info.tree.height,
-            bytes("horizontal"),
-            bytes("vertical"),
-            bytes("indexed-vertical"),
+            "{m},{nodes},{height},{},{:.2},{}",
+            bytes.map(|b| b.to_string()).join(","),
             naive.1,
             per_eta.iter().map(|(f, p, i)| format!("{f:.1},{p:.2},{i:.2}")).collect::<Vec<_>>().join(",")
         ));

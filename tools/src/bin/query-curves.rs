@@ -32,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::create_dir_all(&out)?;
     let db = Database::open(&db_path)?;
     let grid = *db.grid().ok_or("the database holds no grid")?;
-    let centres: Vec<Vec3> = (0..grid.cell_count()).map(|c| grid.cell_box(grid.cell_coords(c)).center()).collect();
+    let centres = grid.cell_centres();
     println!(
         "{} ({} nodes, {} cells, fan-out {})\n",
         db_path.display(),

@@ -24,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(2_000).max(1);
     let filter = args.next().unwrap_or_default();
-    println!("{}\n", machine());
+    println!("{}\n", hdov_tools::machine());
     println!(
         "| city | benchmark | p50 µs | p99 µs | mean µs | max µs | pages/query | nodes/query | items | slowest viewpoint: median µs (pages) |"
     );
@@ -176,23 +176,4 @@ fn print_row(scale: CityScale, name: &str, row: &Row) {
         row.pages,
         row.items
     );
-}
-
-/// The machine, in one line: CPU model, cores, load and memory.
-fn machine() -> String {
-    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let model = cpuinfo
-        .lines()
-        .find_map(|l| l.strip_prefix("model name").and_then(|r| r.split_once(':')).map(|(_, m)| m.trim().to_string()))
-        .unwrap_or_else(|| "unknown CPU".into());
-    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
-    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    let load = load.split_whitespace().take(3).collect::<Vec<_>>().join(" ");
-    let mem = std::fs::read_to_string("/proc/meminfo").unwrap_or_default();
-    let mem_gib = mem
-        .lines()
-        .find_map(|l| l.strip_prefix("MemTotal:"))
-        .and_then(|r| r.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(String::from("?"), |kib| format!("{:.0}", kib / 1024.0 / 1024.0));
-    format!("Machine: {model}, {cores} cores (nproc), {mem_gib} GiB memory, load average {load} at start.")
 }
