@@ -97,3 +97,9 @@ impl Aabb {
         e.x * e.y * e.z
     }
 }
+
+/// The largest factor by which `m` stretches a length: what turns an error in a mesh's units
+/// into world units (mirroring does not count).
+pub fn max_scale(m: &Mat4) -> f32 {
+    [m.x_axis, m.y_axis, m.z_axis].into_iter().map(|a| a.truncate().length()).fold(0.0, f32::max)
+}

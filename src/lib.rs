@@ -61,5 +61,5 @@ pub use build::{BuildParams, BuildReport, VisibilityParams, build, merge::merge}
 pub use db::Database;
 pub use db::info::Info;
 pub use error::{Error, Result};
-pub use query::{Answer, Item, ItemKind, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
+pub use query::{Answer, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
 pub use scene::Scene;

@@ -14,10 +14,12 @@ use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::geom::max_scale;
 use crate::rtree::RTree;
 use crate::scene::{Mesh, Scene};
 
-/// One level: the simplified mesh and the simplifier's error bound (absolute, mesh units).
+/// One level: the simplified mesh and its error bound (absolute; mesh units for leaf levels,
+/// world units for internal ones, which include the error of the simplified parts they merge).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LodLevel {
     pub mesh: Mesh,
@@ -76,20 +78,28 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
             .par_iter()
             .map(|&id| {
                 let node = &tree.nodes[id];
-                let parts: Vec<Mesh> = node
+                // Each part with its error against full detail, in world units.
+                let (parts, errors): (Vec<Mesh>, Vec<f32>) = node
                     .entries
                     .iter()
                     .map(|e| {
                         if node.is_leaf() {
                             let o = &scene.objects[e.child as usize];
                             let coarsest = leaf[o.mesh as usize].last().expect("chains are never empty");
-                            transformed(&coarsest.mesh, &o.transform)
+                            (transformed(&coarsest.mesh, &o.transform), coarsest.error * max_scale(&o.transform))
                         } else {
-                            coarsest_internal(&internal, e.child as usize).mesh.clone()
+                            let coarsest = coarsest_internal(&internal, e.child as usize);
+                            (coarsest.mesh.clone(), coarsest.error)
                         }
                     })
-                    .collect();
-                let chain = aggregate_chain(&parts, params);
+                    .unzip();
+                let mut chain = aggregate_chain(&parts, params);
+                // The simplifier measures against the parts, which are already simplified: a
+                // level's error against full detail is at most its own plus the parts' worst.
+                let inherited = errors.into_iter().fold(0.0, f32::max);
+                for level in &mut chain {
+                    level.error += inherited;
+                }
                 progress.inc(1);
                 (id, chain)
             })
@@ -268,11 +278,11 @@ mod tests {
                 .map(|i| Object {
                     name: format!("o{i}"),
                     mesh: 0,
-                    transform: glam::Mat4::from_translation(glam::Vec3::new(
-                        (i % 8) as f32 * 3.0,
-                        0.0,
-                        (i / 8) as f32 * 3.0,
-                    )),
+                    transform: glam::Mat4::from_scale_rotation_translation(
+                        glam::Vec3::splat(2.0),
+                        glam::Quat::from_rotation_y(i as f32),
+                        glam::Vec3::new((i % 8) as f32 * 6.0, 0.0, (i / 8) as f32 * 6.0),
+                    ),
                 })
                 .collect(),
             grid: None,
@@ -297,6 +307,23 @@ mod tests {
                 "node {id}: {} !< {children}",
                 lods.internal[id][0].faces()
             );
+            // Errors are against full detail: every level at least the worst part's, which
+            // is already simplified (objects scaled ×2 below: their error doubles).
+            let worst_part = node
+                .entries
+                .iter()
+                .map(|e| {
+                    if node.is_leaf() {
+                        lods.leaf[0].last().unwrap().error * 2.0
+                    } else {
+                        lods.internal[e.child as usize].last().unwrap().error
+                    }
+                })
+                .fold(0.0, f32::max);
+            assert!(worst_part > 0.0);
+            for level in &lods.internal[id] {
+                assert!(level.error >= worst_part, "node {id}: {} < {worst_part}", level.error);
+            }
         }
     }
 }

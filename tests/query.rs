@@ -12,7 +12,9 @@ use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::progress::Progress;
 use hdov::query::Camera;
-use hdov::{Answer, BuildParams, Database, ItemKind, Mode, QueryParams, Scene, SessionParams, VisibilityParams};
+use hdov::{
+    Answer, BuildParams, Database, ItemKind, LodRule, Mode, QueryParams, Scene, SessionParams, VisibilityParams,
+};
 use hdov_storage::{LayoutKind, PolicyKind};
 
 /// A block of 5 × 5 buildings with poles and low walls in the streets, a 4 × 1 × 4 grid over
@@ -86,23 +88,103 @@ fn faces_never_grow_with_eta_and_every_item_is_visible() {
     let tmp = tempfile::tempdir().unwrap();
     let db = city(&tmp.path().join("db"));
     let etas = [0.0, 1e-4, 3e-4, 1e-3, 3e-3, 8e-3, 3e-2, 0.1, 0.5, 1.0];
-    let mut stopped = 0;
-    for at in cell_centres(&db) {
-        let mut last = (u64::MAX, u64::MAX);
-        for eta in etas {
-            let a = db.query(at, &q(Mode::Threshold, eta)).unwrap();
-            assert!(a.stats.faces <= last.0, "{at}: η {eta} returned {} faces, a smaller η {}", a.stats.faces, last.0);
-            assert!(a.stats.pages_read <= last.1, "{at}: η {eta} read more pages");
-            last = (a.stats.faces, a.stats.pages_read);
-            for i in &a.items {
-                assert!(i.dov > 0.0, "{at}: η {eta}: {} returned with DoV {}", i.name, i.dov);
-                // An internal LOD stands for a subtree seen with at most η.
-                assert!(i.kind == ItemKind::Object || f64::from(i.dov) <= eta, "{at}: {} above η", i.name);
+    for lod_rule in [LodRule::Dov, LodRule::ScreenError { pixels: 1.0 }, LodRule::ScreenError { pixels: 40.0 }] {
+        let mut stopped = 0;
+        for at in cell_centres(&db) {
+            let mut last = (u64::MAX, u64::MAX);
+            for eta in etas {
+                let a = db.query(at, &QueryParams { lod_rule, ..q(Mode::Threshold, eta) }).unwrap();
+                let faces = a.stats.faces;
+                assert!(faces <= last.0, "{lod_rule} {at}: η {eta} returned {faces} faces, a smaller η {}", last.0);
+                assert!(a.stats.pages_read <= last.1, "{lod_rule} {at}: η {eta} read more pages");
+                last = (a.stats.faces, a.stats.pages_read);
+                for i in &a.items {
+                    assert!(i.dov > 0.0, "{at}: η {eta}: {} returned with DoV {}", i.name, i.dov);
+                    // An internal LOD stands for a subtree seen with at most η.
+                    assert!(i.kind == ItemKind::Object || f64::from(i.dov) <= eta, "{at}: {} above η", i.name);
+                }
+                stopped += a.items.iter().filter(|i| i.kind == ItemKind::Node).count();
             }
-            stopped += a.items.iter().filter(|i| i.kind == ItemKind::Node).count();
+        }
+        // Eq. 5.5 stops wherever eq. 5.4 says the internal LOD is cheaper; the screen-error rule
+        // only where an internal LOD is also within its pixels, which 40 px allows here.
+        if lod_rule != (LodRule::ScreenError { pixels: 1.0 }) {
+            assert!(stopped > 0, "{lod_rule}: some queries stop at internal LODs");
         }
     }
-    assert!(stopped > 0, "some queries stop at internal LODs");
+}
+
+/// The error of `item`'s level `lod` in world units.
+fn world_error(db: &Database, item: &hdov::Item, lod: usize) -> f64 {
+    let cat = db.catalog();
+    match item.kind {
+        ItemKind::Object => {
+            let m = glam::Mat4::from_cols_array(&cat.objects[item.id as usize].transform);
+            f64::from(cat.object_lods(item.id)[lod].error) * f64::from(hdov::geom::max_scale(&m))
+        }
+        ItemKind::Node => f64::from(cat.node_lods[item.id as usize][lod].error),
+    }
+}
+
+#[test]
+fn the_screen_error_rule_picks_the_coarsest_level_within_its_pixels() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Instanced balls (several levels each) among boxes (one level).
+    let mut scene = dov_common::town(5, 4);
+    scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
+    let db = build(&scene, &tmp.path().join("db"), 4);
+    let camera = Camera { look: Vec3::X, fov_y_deg: 50.0, aspect: 1.5, image_height: 400 };
+    let per_unit = camera.pixels_per_unit();
+    let (mut chains, mut coarse) = (0, 0);
+    for at in cell_centres(&db) {
+        let naive = db.query(at, &QueryParams { lod_rule: LodRule::Dov, ..q(Mode::Naive, 0.0) }).unwrap();
+        for pixels in [0.0, 0.5, 2.0, 40.0] {
+            for (eta, camera) in [(0.0, None), (1e-2, None), (1e-3, Some(camera))] {
+                let params =
+                    QueryParams { lod_rule: LodRule::ScreenError { pixels }, camera, ..q(Mode::Threshold, eta) };
+                let a = db.query(at, &params).unwrap();
+                let per_unit = if camera.is_some() { per_unit } else { Camera::default().pixels_per_unit() };
+                let cell = db.grid().unwrap().cell_box(a.cell);
+                for i in &a.items {
+                    let gap = (i.mbr.min - cell.max).max(cell.min - i.mbr.max).max(Vec3::ZERO).length();
+                    let within = |lod: usize| world_error(&db, i, lod) * per_unit <= pixels * f64::from(gap);
+                    let lod = i.lod as usize;
+                    let levels = match i.kind {
+                        ItemKind::Object => db.catalog().object_lods(i.id).len(),
+                        ItemKind::Node => db.catalog().node_lods[i.id as usize].len(),
+                    };
+                    assert!(within(lod) || (i.kind == ItemKind::Object && lod == 0), "{at}: {} too coarse", i.name);
+                    assert!(lod + 1 == levels || !within(lod + 1), "{at} {pixels} px: {} could be coarser", i.name);
+                    chains += usize::from(levels > 1);
+                    coarse += usize::from(lod > 0);
+                }
+                if eta == 0.0 {
+                    // The same objects as the naive answer, only the levels differ; 0 px is LOD 0.
+                    let ids = |a: &Answer| a.items.iter().map(|i| i.id).collect::<Vec<_>>();
+                    assert_eq!(ids(&a), ids(&naive), "{at}");
+                    if pixels == 0.0 {
+                        assert!(a.items.iter().all(|i| i.lod == 0), "{at}: 0 px draws full detail");
+                    }
+                }
+            }
+        }
+    }
+    assert!(chains > 0 && coarse > 0, "some items had coarser levels to choose from and took them");
+}
+
+#[test]
+fn lod_rules_parse_and_print() {
+    for (text, rule) in [
+        ("dov", LodRule::Dov),
+        ("screen", LodRule::ScreenError { pixels: 1.0 }),
+        ("screen:0.25", LodRule::ScreenError { pixels: 0.25 }),
+    ] {
+        assert_eq!(text.parse::<LodRule>().unwrap(), rule);
+        assert_eq!(rule.to_string().parse::<LodRule>().unwrap(), rule);
+    }
+    for bad in ["", "screen:", "screen:-1", "screen:nan", "pixels", "dov:2"] {
+        assert!(bad.parse::<LodRule>().is_err(), "{bad}");
+    }
 }
 
 #[test]

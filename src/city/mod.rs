@@ -209,6 +209,45 @@ fn building_meshes(seed: u64, plan: &CityPlan) -> Vec<Mesh> {
 /// is a street in every generated city (its first street line is 18–22 m wide). Points are
 /// clamped into `grid`'s region, so the walk can be queried.
 pub fn avenue_walk(grid: &ViewGrid, steps: usize) -> Vec<(Vec3, Vec3)> {
+    walk(grid, WalkKind::Straight, steps)
+}
+
+/// The three recorded walks of thesis §5.8.5, all on the first avenue (see [`avenue_walk`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WalkKind {
+    /// End to end, looking ahead (+x).
+    Straight,
+    /// End to end, the gaze swinging left and right by up to 70° (a period of 20 steps).
+    Turning,
+    /// Forward over the first 40 % of the avenue, back, and forward again, looking where it
+    /// goes: every cell is seen again after the walker turned.
+    BackAndForth,
+}
+
+impl WalkKind {
+    pub const ALL: [WalkKind; 3] = [WalkKind::Straight, WalkKind::Turning, WalkKind::BackAndForth];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            WalkKind::Straight => "straight",
+            WalkKind::Turning => "turning",
+            WalkKind::BackAndForth => "back-and-forth",
+        }
+    }
+}
+
+impl std::str::FromStr for WalkKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        WalkKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown walk '{s}' (straight, turning, back-and-forth)"))
+    }
+}
+
+/// `steps` (position, look direction) pairs of walk `kind` in `grid`'s region.
+pub fn walk(grid: &ViewGrid, kind: WalkKind, steps: usize) -> Vec<(Vec3, Vec3)> {
     let r = grid.region;
     let (x0, x1) = (r.min.x + 5.0, (r.max.x - 5.0).max(r.min.x + 5.0));
     let y = (r.min.y + 0.2).min(r.max.y);
@@ -216,7 +255,24 @@ pub fn avenue_walk(grid: &ViewGrid, steps: usize) -> Vec<(Vec3, Vec3)> {
     (0..steps)
         .map(|i| {
             let t = if steps > 1 { i as f32 / (steps - 1) as f32 } else { 0.0 };
-            (Vec3::new(x0 + (x1 - x0) * t, y, z), Vec3::X)
+            match kind {
+                WalkKind::Straight => (Vec3::new(x0 + (x1 - x0) * t, y, z), Vec3::X),
+                WalkKind::Turning => {
+                    let yaw = 70f32.to_radians() * (i as f32 * std::f32::consts::TAU / 20.0).sin();
+                    (Vec3::new(x0 + (x1 - x0) * t, y, z), Vec3::new(yaw.cos(), 0.0, yaw.sin()))
+                }
+                WalkKind::BackAndForth => {
+                    // Three legs: 0 → 0.4, 0.4 → 0, 0 → 0.4 of the avenue.
+                    let leg = (t * 3.0).min(2.999);
+                    let (u, forward) = match leg as u32 {
+                        0 => (leg, true),
+                        1 => (2.0 - leg, false),
+                        _ => (leg - 2.0, true),
+                    };
+                    let x = x0 + (x1 - x0) * 0.4 * u;
+                    (Vec3::new(x, y, z), if forward { Vec3::X } else { Vec3::NEG_X })
+                }
+            }
         })
         .collect()
 }

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
 use hdov::error::{Error, Result};
-use hdov::query::{Camera, Method, Mode};
+use hdov::query::{Camera, LodRule, Method, Mode};
 use hdov::render::View;
 use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
@@ -32,6 +32,10 @@ pub struct QueryArgs {
     /// Vmsse mode: screen-space error bound in pixels.
     #[arg(long, default_value_t = 1.0)]
     tau: f64,
+    /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
+    /// error is at most PIXELS, default 1, from anywhere in the cell) or `dov` (thesis eq. 5.6).
+    #[arg(long, default_value = "screen:1")]
+    lod_rule: LodRule,
     /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     look: Option<Vec3>,
@@ -53,6 +57,7 @@ impl QueryArgs {
             eta: self.eta,
             budget: self.budget,
             tau: self.tau,
+            lod_rule: self.lod_rule,
             camera: self.look.map(|look| Camera { look, ..camera }),
             layout: self.layout,
         }

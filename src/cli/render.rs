@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
 use hdov::error::{Error, Result};
-use hdov::query::Mode;
+use hdov::query::{LodRule, Mode};
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
 use hdov::{Database, QueryParams};
@@ -35,6 +35,10 @@ pub struct RenderCmd {
     /// Vmsse mode: screen-space error bound in pixels.
     #[arg(long, default_value_t = 1.0)]
     tau: f64,
+    /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
+    /// error is at most PIXELS, default 1, from anywhere in the cell) or `dov` (thesis eq. 5.6).
+    #[arg(long, default_value = "screen:1")]
+    lod_rule: LodRule,
     /// Colours: shaded (grey), dov (a ramp over log DoV) or lod (a palette by level).
     #[arg(long, default_value = "shaded")]
     color: ColorMode,
@@ -97,6 +101,7 @@ pub fn render(a: RenderCmd) -> Result<()> {
             eta: a.eta,
             budget: a.budget,
             tau: a.tau,
+            lod_rule: a.lod_rule,
             camera: Some(view.camera()),
             layout: None,
         };

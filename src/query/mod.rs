@@ -84,6 +84,51 @@ impl FromStr for Mode {
     }
 }
 
+/// How a query picks the level of detail of each object it returns and of each subtree it
+/// stops at (docs/query.md, "Levels of detail").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LodRule {
+    /// Thesis eq. 5.5 and 5.6: interpolate in faces by DoV (an object's DoV / [`MAX_DOV`], a
+    /// stopped subtree's DoV / η). Cheap, but a building filling a quarter of the view still
+    /// comes back at a middle level.
+    Dov,
+    /// The coarsest level whose simplification error, seen from the nearest point of the
+    /// query's cell, is at most `pixels` pixels of the camera's image (of [`Camera::default`]
+    /// without one). The answer then holds for every viewpoint of the cell.
+    ScreenError { pixels: f64 },
+}
+
+impl Default for LodRule {
+    fn default() -> Self {
+        LodRule::ScreenError { pixels: 1.0 }
+    }
+}
+
+impl fmt::Display for LodRule {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LodRule::Dov => f.write_str("dov"),
+            LodRule::ScreenError { pixels } => write!(f, "screen:{pixels}"),
+        }
+    }
+}
+
+impl FromStr for LodRule {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<LodRule, String> {
+        let bad = || format!("unknown LOD rule '{s}' (dov, screen or screen:PIXELS)");
+        match s.split_once(':') {
+            None if s == "dov" => Ok(LodRule::Dov),
+            None if s == "screen" => Ok(LodRule::default()),
+            Some(("screen", px)) => match px.parse::<f64>() {
+                Ok(pixels) if pixels.is_finite() && pixels >= 0.0 => Ok(LodRule::ScreenError { pixels }),
+                _ => Err(format!("LOD rule '{s}': pixels must be a number ≥ 0")),
+            },
+            _ => Err(bad()),
+        }
+    }
+}
+
 /// What a query asks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueryParams {
@@ -94,9 +139,11 @@ pub struct QueryParams {
     pub budget: u64,
     /// Screen-space error bound of vmsse mode, in pixels of the camera's image.
     pub tau: f64,
+    /// How threshold and naive modes pick levels (vmsse has its own, budget the thesis's).
+    pub lod_rule: LodRule,
     /// With a camera, the answer is culled to its view frustum (what is drawn this frame);
-    /// without, it is everything the cell may see in every direction. Vmsse mode takes its
-    /// image size and field of view from it (or from [`Camera::default`]).
+    /// without, it is everything the cell may see in every direction. Vmsse mode and the
+    /// screen-error LOD rule take its image size and field of view (or [`Camera::default`]'s).
     pub camera: Option<Camera>,
     /// The V-page layout to read (default: indexed-vertical if the database has it).
     pub layout: Option<LayoutKind>,
@@ -104,7 +151,15 @@ pub struct QueryParams {
 
 impl Default for QueryParams {
     fn default() -> Self {
-        Self { mode: Mode::Threshold, eta: 1e-3, budget: 100_000, tau: 1.0, camera: None, layout: None }
+        Self {
+            mode: Mode::Threshold,
+            eta: 1e-3,
+            budget: 100_000,
+            tau: 1.0,
+            lod_rule: LodRule::default(),
+            camera: None,
+            layout: None,
+        }
     }
 }
 
@@ -194,18 +249,26 @@ impl Database {
     /// and one V-page per node the traversal enters.
     pub fn query(&self, at: Vec3, params: &QueryParams) -> Result<Answer> {
         let mut access = access::Access::open(self, params.layout)?;
-        self.query_with(&mut access, at, params)
+        self.query_with(&mut access, at, params, true)
     }
 
-    /// A query through an existing reader (a session's, with its cache).
-    pub(crate) fn query_with(&self, access: &mut access::Access, at: Vec3, params: &QueryParams) -> Result<Answer> {
+    /// A query through an existing reader (a session's, with its cache). With `cull` false the
+    /// camera only sets the screen-error scale: the answer is the whole cell's.
+    pub(crate) fn query_with(
+        &self,
+        access: &mut access::Access,
+        at: Vec3,
+        params: &QueryParams,
+        cull: bool,
+    ) -> Result<Answer> {
         let start = Instant::now();
         let warnings = self.check_query(params)?;
         let (cell, cell_id) = self.locate(at)?;
         access.reset_io();
         access.flip(cell_id)?;
-        let mut out = traverse::run(self, access, at, params)?;
-        if let Some(cam) = &params.camera {
+        let cell_box = self.grid().map_or(Aabb::new(at, at), |g| g.cell_box(cell));
+        let mut out = traverse::run(self, access, at, cell_box, params)?;
+        if let Some(cam) = params.camera.as_ref().filter(|_| cull) {
             let frustum = cam.frustum(at);
             out.items.retain(|i| frustum.meets(&i.mbr));
         }

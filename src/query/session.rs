@@ -191,9 +191,8 @@ impl<'db> Session<'db> {
         let flipped = self.answer.as_ref().is_none_or(|a| a.cell_id != cell_id);
         let mut step = Step { step: self.steps, at: at.to_array(), cell, flipped, ..Default::default() };
         if flipped {
-            // The cell's whole answer (no camera): what a walkthrough keeps resident.
-            let query = QueryParams { camera: None, ..self.params.query };
-            let answer = self.db.query_with(&mut self.access, at, &query)?;
+            // The cell's whole answer (not culled): what a walkthrough keeps resident.
+            let answer = self.db.query_with(&mut self.access, at, &self.params.query, false)?;
             step.pages_read = answer.stats.pages_read;
             step.hits = answer.stats.page_hits;
             step.misses = answer.stats.pages_requested - answer.stats.page_hits;
@@ -447,8 +446,7 @@ impl<'db> Session<'db> {
         if ahead_id == cell_id {
             return Ok(0);
         }
-        let query = QueryParams { camera: None, ..self.params.query };
-        let pages = self.db.query_with(&mut self.access, ahead, &query)?.stats.pages_read;
+        let pages = self.db.query_with(&mut self.access, ahead, &self.params.query, false)?.stats.pages_read;
         // Back to the current cell (free where the layout keeps no per-cell state).
         self.access.flip(cell_id)?;
         Ok(pages)

@@ -5,12 +5,12 @@ use glam::{Mat4, Vec3};
 
 use super::access::Access;
 use super::camera::Frustum;
-use super::{Item, ItemKind, MAX_DOV, Mode, QueryParams};
+use super::{Item, ItemKind, LodRule, MAX_DOV, Mode, QueryParams};
 use crate::db::Database;
 use crate::db::catalog::LodRef;
 use crate::db::tree_page::NodePage;
 use crate::error::Result;
-use crate::geom::Aabb;
+use crate::geom::{Aabb, max_scale};
 use crate::lod::pick_level;
 use hdov_storage::VEntry;
 
@@ -21,9 +21,9 @@ pub(super) struct Found {
     pub over_budget: bool,
 }
 
-/// Runs `params.mode` from `at` in the cell `access` has selected.
-pub(super) fn run(db: &Database, access: &mut Access, at: Vec3, params: &QueryParams) -> Result<Found> {
-    let mut t = Traversal { db, access, at, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
+/// Runs `params.mode` from `at` in the cell `access` has selected, whose box is `cell_box`.
+pub(super) fn run(db: &Database, access: &mut Access, at: Vec3, cell_box: Aabb, params: &QueryParams) -> Result<Found> {
+    let mut t = Traversal { db, access, at, cell_box, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
     let mut over_budget = false;
     match params.mode {
         Mode::Threshold | Mode::Vmsse => t.descend(0, 1.0)?,
@@ -41,6 +41,7 @@ struct Traversal<'a, 'db> {
     db: &'a Database,
     access: &'a mut Access<'db>,
     at: Vec3,
+    cell_box: Aabb,
     params: &'a QueryParams,
     items: Vec<Item>,
     nodes_visited: u64,
@@ -88,25 +89,28 @@ impl Traversal<'_, '_> {
         Ok(())
     }
 
-    /// The level to draw object `o` at, seen with DoV `d`.
+    /// The level to draw object `o` at, seen with DoV `d` (threshold, naive and vmsse modes).
     fn leaf_level(&self, o: u32, d: f64, mbr: &Aabb) -> usize {
         let chain = self.db.catalog().object_lods(o);
-        match self.params.mode {
-            Mode::Vmsse => {
-                let scale = object_scale(&self.db.catalog().objects[o as usize].transform);
-                self.coarsest_within_tau(chain, d, mbr, scale).unwrap_or(0)
+        let scale = || f64::from(max_scale(&Mat4::from_cols_array(&self.db.catalog().objects[o as usize].transform)));
+        match (self.params.mode, self.params.lod_rule) {
+            (Mode::Vmsse, _) => self.coarsest_within_tau(chain, d, mbr, scale()).unwrap_or(0),
+            (_, LodRule::ScreenError { pixels }) => {
+                self.coarsest_within_pixels(chain, mbr, scale(), pixels).unwrap_or(0)
             }
             // Eq. 5.6: k = min(DoV / MAXDOV, 1).
-            _ => pick(chain, d / MAX_DOV),
+            (_, LodRule::Dov) => pick(chain, d / MAX_DOV),
         }
     }
 
     /// Whether to stop at child node `c` (DoV `d`, `nvo` visible objects), and at which level.
     ///
-    /// Either mode's level is then made coarser until it draws no more than the visible objects
-    /// would at their coarsest (leaf LODs of barely visible objects are coarse, which eq. 5.4's
-    /// estimate from full-detail faces does not see); where no level does, the query descends.
-    /// So stopping never draws more than descending would.
+    /// Under eq. 5.5 and vmsse the level is then made coarser until it draws no more than the
+    /// visible objects would at their coarsest (leaf LODs of barely visible objects are coarse,
+    /// which eq. 5.4's estimate from full-detail faces does not see); where no level does, the
+    /// query descends. Under the screen-error rule a coarser level would break the error bound,
+    /// so the query stops only where the level within it already fits. Either way stopping
+    /// never draws more than descending would.
     fn stop_at(&self, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Option<usize> {
         let chain = &self.db.catalog().node_lods[c as usize];
         let level = match self.params.mode {
@@ -117,12 +121,23 @@ impl Traversal<'_, '_> {
                 if !(d <= eta && self.internal_is_cheaper(c, nvo)) {
                     return None;
                 }
-                pick(chain, d / eta) // eq. 5.5
+                match self.params.lod_rule {
+                    LodRule::Dov => pick(chain, d / eta), // eq. 5.5
+                    LodRule::ScreenError { pixels } => {
+                        let level = self.coarsest_within_pixels(chain, mbr, 1.0, pixels)?;
+                        return (u64::from(chain[level].faces) <= self.descent_cap(c, nvo)).then_some(level);
+                    }
+                }
             }
         };
-        let shape = &self.db.catalog().node_shapes[c as usize];
-        let cap = u64::from(nvo) * shape.coarsest_object_faces / u64::from(shape.objects.max(1));
+        let cap = self.descent_cap(c, nvo);
         (level..chain.len()).find(|&l| u64::from(chain[l].faces) <= cap)
+    }
+
+    /// The faces node `c`'s `nvo` visible objects would draw at their coarsest leaf LODs.
+    fn descent_cap(&self, c: u32, nvo: u32) -> u64 {
+        let shape = &self.db.catalog().node_shapes[c as usize];
+        u64::from(nvo) * shape.coarsest_object_faces / u64::from(shape.objects.max(1))
     }
 
     /// `h·(1 + log_M s) < log_M(NVO)` (thesis eq. 5.4), with h = log_M m, m the node's leaf
@@ -143,6 +158,15 @@ impl Traversal<'_, '_> {
         (0..chain.len())
             .rev()
             .find(|&l| bias * cam.screen_error(self.at, mbr, f64::from(chain[l].error) * scale) <= self.params.tau)
+    }
+
+    /// The screen-error rule: the coarsest level whose error (times `scale`, for an object's
+    /// transform) is at most `pixels` from the nearest point of the cell (only an error-free
+    /// level where the cell meets the box); `None` when no level is.
+    fn coarsest_within_pixels(&self, chain: &[LodRef], mbr: &Aabb, scale: f64, pixels: f64) -> Option<usize> {
+        let per_unit = self.params.camera.unwrap_or_default().pixels_per_unit();
+        let distance = f64::from(box_distance(&self.cell_box, mbr));
+        (0..chain.len()).rev().find(|&l| f64::from(chain[l].error) * scale * per_unit <= pixels * distance)
     }
 
     fn push_object(&mut self, o: u32, lod: usize, d: f64, mbr: Aabb) {
@@ -167,7 +191,7 @@ impl Traversal<'_, '_> {
             for (e, ve) in page.node.entries.iter().zip(&v) {
                 let d = f64::from(ve.dov);
                 if d > 0.0 {
-                    let lod = pick(self.db.catalog().object_lods(e.child), d / MAX_DOV);
+                    let lod = self.leaf_level(e.child, d, &e.mbr);
                     self.push_object(e.child, lod, d, e.mbr);
                 }
             }
@@ -271,11 +295,9 @@ fn item(kind: ItemKind, id: u32, name: std::sync::Arc<str>, lod: usize, lod_ref:
     Item { kind, id, name, lod: lod as u32, faces: lod_ref.faces, dov: d as f32, mbr, lod_ref }
 }
 
-/// The largest scale of an object's transform: leaf LOD errors are in mesh units.
-fn object_scale(cols: &[f32; 16]) -> f64 {
-    let m = Mat4::from_cols_array(cols);
-    let s = [m.x_axis.truncate().length(), m.y_axis.truncate().length(), m.z_axis.truncate().length()];
-    f64::from(s.into_iter().fold(0.0f32, f32::max))
+/// The distance between the nearest points of two boxes (0 where they meet).
+fn box_distance(a: &Aabb, b: &Aabb) -> f32 {
+    (b.min - a.max).max(a.min - b.max).max(Vec3::ZERO).length()
 }
 
 /// B(μ) = √μ, μ = DoV over the share of the sphere the box's bounding sphere covers from `at`

@@ -22,6 +22,7 @@ use crate::db::Database;
 use crate::db::catalog::LodRef;
 use crate::error::{Error, Result};
 use crate::gfx::{Gpu, Vertex, padded_row_bytes, push_world};
+use crate::query::camera::Frustum;
 use crate::query::{Answer, Camera, ItemKind};
 use crate::scene::Mesh;
 
@@ -66,6 +67,14 @@ impl View {
             aspect: self.width as f32 / self.height as f32,
             image_height: self.height,
         }
+    }
+
+    /// A frustum a little wider than the image's (2 % in each direction): what lies outside it
+    /// draws no pixel, so [`Renderer::draw`] skips it; the margin keeps rounding from culling a
+    /// box that touches the image's edge.
+    pub fn culling_frustum(&self) -> Frustum {
+        let fov_y_deg = ((self.fov_y_deg.to_radians() / 2.0).tan() * 1.02).atan().to_degrees() * 2.0;
+        Camera { fov_y_deg, ..self.camera() }.frustum(self.eye)
     }
 
     /// Checks the numbers; the error names the parameter.
@@ -331,7 +340,11 @@ impl Renderer {
         self.gpu.check_texture_size("image", w, h)?;
         let mut vertices = Vec::new();
         let mut colors = Vec::new();
+        let frustum = view.culling_frustum();
         for (i, d) in items.iter().enumerate() {
+            if !frustum.meets(&d.mesh.bounds().transformed(&d.transform)) {
+                continue;
+            }
             let first = vertices.len();
             push_world(&mut vertices, d.mesh, &d.transform, view.eye, i as u32);
             let c = u32::from_le_bytes([d.color[0], d.color[1], d.color[2], 255]);

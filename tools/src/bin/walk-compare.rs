@@ -1,55 +1,91 @@
-//! One recorded walk, several methods (thesis table 5.3): the database's avenue walk
-//! (`hdov::city::avenue_walk`, 60 steps looking +x) walked by VISUAL at η = 0, 1e-3 and 8e-3,
-//! by REVIEW at two disk-cell sizes, and by frustum culling alone (`Mode::Frustum` through the
-//! session: every object of the cell whose box meets the view, at full detail). Per method: mean
-//! and variance of a step's time, pages read, faces drawn, resident bytes and, with a graphics
-//! adapter, mean PSNR and coverage difference of what is drawn against full detail from the
-//! step's camera. Prints a Markdown table, with the machine.
+//! Recorded walks, several methods (thesis §5.8.5, table 5.3, fig. 5.26): the database's avenue
+//! walks (`hdov::city::walk`: straight, turning, back-and-forth) walked by VISUAL (the
+//! HDoV-tree) at several η and LOD rules, by REVIEW at two disk-cell sizes, and by frustum
+//! culling alone (`Mode::Frustum` through the session: every object of the cell whose box meets
+//! the view, at full detail). Per method: mean and variance of a step's time, pages read, faces
+//! drawn, resident bytes, the time to draw the frame, and, with a graphics adapter, PSNR and
+//! coverage difference of what is drawn against full detail from the step's camera. Prints a
+//! Markdown table per walk, with the machine; `--pictures DIR` writes, per walk, the frame where
+//! REVIEW at 200 m loses most against full detail: full | VISUAL η = 1e-3 | REVIEW, side by side.
 //!
-//! `cargo run --release -p hdov-tools --bin walk-compare -- DB [WxH]` (image size, default
-//! 320x200). Each method walks once untimed (the OS file cache warm, its session cold), then
+//! `cargo run --release -p hdov-tools --bin walk-compare -- DB [--size WxH] [--steps N]
+//! [--walk straight|turning|back-and-forth|all] [--pictures DIR]` (default 320x200, 60 steps,
+//! all walks). Each method walks once untimed (the OS file cache warm, its session cold), then
 //! once timed in a fresh session; images are drawn after each timed step, outside its time.
 
+use std::path::PathBuf;
+use std::time::Instant;
+
 use glam::Vec3;
-use hdov::query::{Camera, Method, Mode};
+use hdov::city::WalkKind;
+use hdov::query::{Camera, LodRule, Method, Mode};
 use hdov::render::fidelity;
 use hdov::render::{ColorMode, Image, Renderer, View};
 use hdov::review::ReviewParams;
 use hdov::{Database, QueryParams, SessionParams, Step};
 use hdov_storage::PolicyKind;
 
-/// Steps of the walk.
-const STEPS: usize = 60;
 /// REVIEW's field of view, both ways (the thesis's 45°); the image's horizontal field of view
 /// is the same, so that no method culled what the image shows.
 const FOV_H_DEG: f32 = 45.0;
+/// The rows whose frames make the picture pair (fig. 5.26).
+const VISUAL_PICTURED: &str = "VISUAL η = 1e-3";
+const REVIEW_PICTURED: &str = "REVIEW SF 1, eyesight 200 m";
+
+struct Options {
+    db: PathBuf,
+    size: [u32; 2],
+    steps: usize,
+    walks: Vec<WalkKind>,
+    pictures: Option<PathBuf>,
+}
+
+fn options() -> Result<Options, String> {
+    let usage = "usage: walk-compare DB [--size WxH] [--steps N] [--walk KIND|all] [--pictures DIR]";
+    let mut args = std::env::args().skip(1);
+    let mut o = Options {
+        db: args.next().ok_or(usage)?.into(),
+        size: [320, 200],
+        steps: 60,
+        walks: WalkKind::ALL.to_vec(),
+        pictures: None,
+    };
+    while let Some(flag) = args.next() {
+        let value = args.next().ok_or_else(|| format!("{flag} needs a value; {usage}"))?;
+        match flag.as_str() {
+            "--size" => {
+                let v: Vec<u32> =
+                    value.split('x').map(str::parse).collect::<Result<_, _>>().map_err(|e| format!("--size: {e}"))?;
+                let [w, h] = v[..] else { return Err("--size is WxH".into()) };
+                o.size = [w, h];
+            }
+            "--steps" => o.steps = value.parse().map_err(|e| format!("--steps: {e}"))?,
+            "--walk" if value == "all" => o.walks = WalkKind::ALL.to_vec(),
+            "--walk" => o.walks = vec![value.parse()?],
+            "--pictures" => o.pictures = Some(value.into()),
+            _ => return Err(format!("unknown flag {flag}; {usage}")),
+        }
+    }
+    Ok(o)
+}
 
 struct Row {
     name: String,
     micros: Vec<f64>,
     pages: u64,
     faces: Vec<f64>,
+    draw_ms: Vec<f64>,
     max_resident: u64,
     mean_resident: f64,
     /// PSNR of each step (∞ where equal) and coverage difference.
     psnr: Vec<f64>,
     coverage: Vec<f64>,
+    images: Vec<Image>,
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let db_path = args.next().ok_or("usage: walk-compare DB [WxH]")?;
-    let size: Vec<u32> =
-        args.next().unwrap_or_else(|| "320x200".into()).split('x').map(str::parse).collect::<Result<_, _>>()?;
-    let [w, h] = size[..] else { return Err("size is WxH".into()) };
-    let db = Database::open(std::path::Path::new(&db_path))?;
-    let grid = *db.grid().ok_or("the database holds no viewing grid")?;
-    let path = hdov::city::avenue_walk(&grid, STEPS);
-    let aspect = w as f32 / h as f32;
-    let fov_y = (2.0 * ((FOV_H_DEG.to_radians() / 2.0).tan() / aspect).atan()).to_degrees();
-    let camera = Camera { look: Vec3::X, fov_y_deg: fov_y, aspect, image_height: h };
-    let visual = |eta: f64| SessionParams {
-        query: QueryParams { eta, camera: Some(camera), ..QueryParams::default() },
+fn methods(camera: Camera) -> Vec<(&'static str, SessionParams)> {
+    let visual = |eta: f64, lod_rule: LodRule| SessionParams {
+        query: QueryParams { eta, lod_rule, camera: Some(camera), ..QueryParams::default() },
         ..SessionParams::default()
     };
     let review = |review_box: f32, eyesight: f32| SessionParams {
@@ -58,7 +94,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cache: PolicyKind::Dplru,
         ..SessionParams::default()
     };
-    let methods = [
+    let screen = LodRule::default();
+    vec![
         (
             "frustum culling",
             SessionParams {
@@ -66,12 +103,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ..SessionParams::default()
             },
         ),
-        ("VISUAL η = 0", visual(0.0)),
-        ("VISUAL η = 1e-3", visual(1e-3)),
-        ("VISUAL η = 8e-3", visual(8e-3)),
-        ("REVIEW SF 1, eyesight 200 m", review(1.0, 200.0)),
+        ("VISUAL η = 0, LOD 0 (visibility alone)", visual(0.0, LodRule::ScreenError { pixels: 0.0 })),
+        ("VISUAL η = 0", visual(0.0, screen)),
+        (VISUAL_PICTURED, visual(1e-3, screen)),
+        ("VISUAL η = 8e-3", visual(8e-3, screen)),
+        ("VISUAL η = 1e-3, 0.5 px", visual(1e-3, LodRule::ScreenError { pixels: 0.5 })),
+        ("VISUAL η = 1e-3, eq. 5.6 levels (thesis)", visual(1e-3, LodRule::Dov)),
+        (REVIEW_PICTURED, review(1.0, 200.0)),
         ("REVIEW SF 2, eyesight 1 km", review(2.0, 1000.0)),
-    ];
+    ]
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let o = options()?;
+    let [w, h] = o.size;
+    let db = Database::open(&o.db)?;
+    let grid = *db.grid().ok_or("the database holds no viewing grid")?;
+    let aspect = w as f32 / h as f32;
+    let fov_y = (2.0 * ((FOV_H_DEG.to_radians() / 2.0).tan() / aspect).atan()).to_degrees();
+    let camera = Camera { look: Vec3::X, fov_y_deg: fov_y, aspect, image_height: h };
     let renderer = match Renderer::new() {
         Ok(r) => Some(r),
         Err(e) => {
@@ -79,63 +129,110 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None
         }
     };
-    let views: Vec<View> = path.iter().map(|&(at, look)| View::new(at, look, fov_y, w, h)).collect();
-    let full: Vec<Image> = match &renderer {
-        Some(r) => views.iter().map(|v| r.render_full(&db, v, ColorMode::Shaded)).collect::<hdov::Result<_>>()?,
-        None => Vec::new(),
-    };
-    let mut rows = Vec::new();
-    for (name, params) in &methods {
-        let mut session = db.session(params)?;
-        for &(at, look) in &path {
-            session.step(at, Some(look))?;
-        }
-        let mut session = db.session(params)?;
-        let mut steps: Vec<Step> = Vec::with_capacity(path.len());
-        let (mut psnr, mut coverage) = (Vec::new(), Vec::new());
-        for (i, &(at, look)) in path.iter().enumerate() {
-            steps.push(session.step(at, Some(look))?);
-            if let Some(r) = &renderer {
-                let f = fidelity::compare(&session.draw(r, &views[i])?, &full[i]);
-                psnr.push(f.psnr);
-                coverage.push(f.coverage_diff);
-            }
-        }
-        rows.push(Row {
-            name: name.to_string(),
-            micros: steps.iter().map(|s| s.micros as f64).collect(),
-            pages: steps.iter().map(|s| s.pages_read).sum(),
-            faces: steps.iter().map(|s| s.faces as f64).collect(),
-            max_resident: steps.iter().map(|s| s.resident_bytes).max().unwrap_or(0),
-            mean_resident: mean(&steps.iter().map(|s| s.resident_bytes as f64).collect::<Vec<_>>()),
-            psnr,
-            coverage,
-        });
-    }
     println!("{}\n", hdov_tools::machine());
     println!(
-        "{} ({} objects), {STEPS} steps along the first avenue looking +x; images {w}×{h}, {FOV_H_DEG}° across ({fov_y:.1}° vertical){}.\n",
-        db_path,
+        "{} ({} objects); images {w}×{h}, {FOV_H_DEG}° across ({fov_y:.1}° vertical){}; LOD rule of VISUAL rows: {} unless named.\n",
+        o.db.display(),
         db.catalog().objects.len(),
-        renderer.as_ref().map_or(String::from(", no adapter: no fidelity"), |r| format!(", on {}", r.adapter_name()))
+        renderer.as_ref().map_or(String::from(", no adapter: no fidelity"), |r| format!(", on {}", r.adapter_name())),
+        LodRule::default(),
     );
+    for &kind in &o.walks {
+        let path = hdov::city::walk(&grid, kind, o.steps);
+        let views: Vec<View> = path.iter().map(|&(at, look)| View::new(at, look, fov_y, w, h)).collect();
+        let full: Vec<Image> = match &renderer {
+            Some(r) => views.iter().map(|v| r.render_full(&db, v, ColorMode::Shaded)).collect::<hdov::Result<_>>()?,
+            None => Vec::new(),
+        };
+        let mut rows = Vec::new();
+        for (name, params) in methods(camera) {
+            rows.push(walk_one(&db, name, &params, &path, &views, &full, renderer.as_ref(), o.pictures.is_some())?);
+        }
+        println!("### The {} walk: {} steps\n", kind.name(), o.steps);
+        print_table(&rows);
+        if let (Some(dir), Some(_)) = (&o.pictures, &renderer) {
+            let file = dir.join(format!("review-vs-visual-{}.png", kind.name()));
+            if let Some(step) = picture_pair(&rows, &full, &file)? {
+                println!(
+                    "\nPicture: `{}`, step {step} (left to right: full detail, {VISUAL_PICTURED}, {REVIEW_PICTURED}).\n",
+                    file.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn walk_one(
+    db: &Database,
+    name: &str,
+    params: &SessionParams,
+    path: &[(Vec3, Vec3)],
+    views: &[View],
+    full: &[Image],
+    renderer: Option<&Renderer>,
+    keep_images: bool,
+) -> hdov::Result<Row> {
+    let mut session = db.session(params)?;
+    for &(at, look) in path {
+        session.step(at, Some(look))?;
+    }
+    let mut session = db.session(params)?;
+    let mut steps: Vec<Step> = Vec::with_capacity(path.len());
+    let (mut psnr, mut coverage, mut draw_ms, mut images) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (i, &(at, look)) in path.iter().enumerate() {
+        steps.push(session.step(at, Some(look))?);
+        if let Some(r) = renderer {
+            let start = Instant::now();
+            let image = session.draw(r, &views[i])?;
+            draw_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            let f = fidelity::compare(&image, &full[i]);
+            psnr.push(f.psnr);
+            coverage.push(f.coverage_diff);
+            let pictured = name == VISUAL_PICTURED || name == REVIEW_PICTURED;
+            if keep_images && pictured {
+                images.push(image);
+            }
+        }
+    }
+    Ok(Row {
+        name: name.to_string(),
+        micros: steps.iter().map(|s| s.micros as f64).collect(),
+        pages: steps.iter().map(|s| s.pages_read).sum(),
+        faces: steps.iter().map(|s| s.faces as f64).collect(),
+        draw_ms,
+        max_resident: steps.iter().map(|s| s.resident_bytes).max().unwrap_or(0),
+        mean_resident: mean(&steps.iter().map(|s| s.resident_bytes as f64).collect::<Vec<_>>()),
+        psnr,
+        coverage,
+        images,
+    })
+}
+
+fn print_table(rows: &[Row]) {
     let frustum_faces = mean(&rows[0].faces);
     println!(
-        "| method | step µs, mean | step µs², variance | pages read | faces drawn, mean | of frustum culling's | resident MB, mean / max | PSNR dB, mean of finite (frames equal to full detail) | coverage diff, mean |"
+        "| method | step µs, mean | step µs², variance | pages read | faces drawn, mean | of frustum culling's | resident MB, mean / max | draw ms, mean | PSNR dB, mean (min) | frames ≥ 35 dB | coverage diff, mean |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for r in &rows {
-        let finite: Vec<f64> = r.psnr.iter().copied().filter(|p| p.is_finite()).collect();
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows {
+        // Equal frames have PSNR ∞; the mean is over MSE (so ∞ frames count as zero error).
         let psnr = if r.psnr.is_empty() {
             "–".into()
-        } else if finite.is_empty() {
-            format!("∞ ({})", r.psnr.len())
         } else {
-            format!("{:.1} ({})", mean(&finite), r.psnr.len() - finite.len())
+            let min = r.psnr.iter().copied().fold(f64::INFINITY, f64::min);
+            format!("{} ({})", db_text(mean_psnr(&r.psnr)), db_text(min))
+        };
+        let good = if r.psnr.is_empty() {
+            "–".into()
+        } else {
+            format!("{} of {}", r.psnr.iter().filter(|&&p| p >= 35.0).count(), r.psnr.len())
         };
         let coverage = if r.coverage.is_empty() { "–".into() } else { format!("{:.4}", mean(&r.coverage)) };
+        let draw = if r.draw_ms.is_empty() { "–".into() } else { format!("{:.0}", mean(&r.draw_ms)) };
         println!(
-            "| {} | {:.0} | {:.0} | {} | {:.0} | {:.1} % | {:.2} / {:.2} | {} | {} |",
+            "| {} | {:.0} | {:.0} | {} | {:.0} | {:.1} % | {:.2} / {:.2} | {} | {} | {} | {} |",
             r.name,
             mean(&r.micros),
             variance(&r.micros),
@@ -144,11 +241,36 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             100.0 * mean(&r.faces) / frustum_faces.max(1.0),
             r.mean_resident / 1e6,
             r.max_resident as f64 / 1e6,
+            draw,
             psnr,
+            good,
             coverage
         );
     }
-    Ok(())
+}
+
+/// Writes full | VISUAL | REVIEW at the step where REVIEW's coverage differs most from full
+/// detail; returns that step (`None` when REVIEW lost nothing).
+fn picture_pair(rows: &[Row], full: &[Image], file: &std::path::Path) -> hdov::Result<Option<usize>> {
+    let row = |name: &str| rows.iter().find(|r| r.name == name).expect("a pictured method");
+    let (visual, review) = (row(VISUAL_PICTURED), row(REVIEW_PICTURED));
+    let worst = (0..review.coverage.len()).max_by(|&a, &b| review.coverage[a].total_cmp(&review.coverage[b]));
+    let Some(step) = worst.filter(|&s| review.coverage[s] > 0.0) else { return Ok(None) };
+    if let Some(dir) = file.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| hdov::Error::io(dir, e))?;
+    }
+    full[step].beside(&visual.images[step]).beside(&review.images[step]).write_png(file)?;
+    Ok(Some(step))
+}
+
+/// PSNR of the mean squared error over frames (the mean of per-frame MSEs), ∞ if all equal.
+fn mean_psnr(psnr: &[f64]) -> f64 {
+    let mse = mean(&psnr.iter().map(|p| 255f64.powi(2) / 10f64.powf(p / 10.0)).collect::<Vec<_>>());
+    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255f64.powi(2) / mse).log10() }
+}
+
+fn db_text(p: f64) -> String {
+    if p.is_finite() { format!("{p:.1}") } else { "∞".into() }
 }
 
 fn mean(v: &[f64]) -> f64 {
