@@ -476,6 +476,15 @@ fn query_and_walk_answer_in_json() {
     assert_refused(&hdov(&["walk", &s("db"), "--path", &s("bad.csv")]), "bad.csv: line 2");
     std::fs::write(s("out.csv"), format!("{x},1.7,{z}\n{},1.7,{z}\n", x + 1e5)).unwrap();
     assert_refused(&hdov(&["walk", &s("db"), "--path", &s("out.csv")]), "out.csv: line 2");
+    // A recorded walk instead of a file; the turning walk's gaze leaves the avenue's axis.
+    let o = hdov(&["walk", &s("db"), "--walk", "turning", "--steps", "9", "--lod-rule", "dov", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let w: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(w["steps"].as_array().unwrap().len(), 9);
+    assert_refused(&hdov(&["walk", &s("db"), "--walk", "sideways"]), "sideways");
+    assert_refused(&hdov(&["walk", &s("db"), "--walk", "straight", "--path", &s("walk.csv")]), "--path");
+    assert_refused(&hdov(&["walk", &s("db")]), "--path");
+    assert_refused(&hdov(&["query", &s("db"), "--at", &format!("{x},1.7,{z}"), "--lod-rule", "screen:-2"]), "≥ 0");
 }
 
 /// `hdov render` writes a PNG of the answer (or full detail), reports fidelity against full

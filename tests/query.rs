@@ -423,3 +423,26 @@ fn a_session_refuses_a_step_outside_the_grid_and_goes_on() {
     let again = s.step(Vec3::new(10.5, 1.7, 10.0), None).unwrap();
     assert!(first.flipped && !again.flipped && again.resident_bytes == first.resident_bytes);
 }
+
+#[test]
+fn a_session_culls_each_step_to_its_own_look_in_every_mode() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let camera = Camera { look: Vec3::X, ..Camera::default() };
+    for mode in [Mode::Frustum, Mode::Threshold] {
+        let params =
+            SessionParams { query: QueryParams { mode, camera: Some(camera), ..q(mode, 1e-3) }, ..Default::default() };
+        let mut s = db.session(&params).unwrap();
+        for look in [Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::new(-1.0, 0.0, -1.0)] {
+            let at = Vec3::new(10.0, 1.7, 10.0);
+            s.step(at, Some(look)).unwrap();
+            let drawn: BTreeSet<_> = s.frame_items(at, Some(look)).iter().map(|i| (i.kind, i.id, i.lod)).collect();
+            // The point query with the step's own camera draws the same.
+            let alone = QueryParams { camera: Some(Camera { look, ..camera }), ..params.query };
+            let a = db.query(at, &alone).unwrap();
+            let expected: BTreeSet<_> = a.items.iter().map(|i| (i.kind, i.id, i.lod)).collect();
+            assert_eq!(drawn, expected, "{mode} looking {look}");
+            assert!(!drawn.is_empty(), "{mode} looking {look} sees the city");
+        }
+    }
+}

@@ -7,6 +7,7 @@ use glam::Vec3;
 use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
+use hdov::city::WalkKind;
 use hdov::error::{Error, Result};
 use hdov::query::{Camera, LodRule, Method, Mode};
 use hdov::render::View;
@@ -139,8 +140,15 @@ fn print_answer(a: &Answer, list: usize) {
 pub struct WalkCmd {
     db: PathBuf,
     /// The path: a CSV file of viewpoints, `x,y,z` or `x,y,z,dx,dy,dz` (a view direction) per line.
-    #[arg(long)]
-    path: PathBuf,
+    #[arg(long, required_unless_present = "walk")]
+    path: Option<PathBuf>,
+    /// Instead of --path, a recorded walk along a generated city's first avenue: straight,
+    /// turning (the gaze swinging ±70°) or back-and-forth (thesis §5.8.5).
+    #[arg(long, conflicts_with = "path", value_parser = |s: &str| s.parse::<WalkKind>())]
+    walk: Option<WalkKind>,
+    /// --walk: steps along it.
+    #[arg(long, default_value_t = 150, requires = "walk", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    steps: u32,
     #[command(flatten)]
     query: QueryArgs,
     /// visual (the HDoV-tree) or review (the spatial baseline: disk cells and CSearch).
@@ -215,7 +223,16 @@ pub(super) struct WalkSummary {
 
 pub fn walk(a: WalkCmd) -> Result<()> {
     let db = Database::open(&a.db)?;
-    let path = read_path(&a.path)?;
+    // Steps are named by their line in the path file, or by their index along a recorded walk.
+    let (path, source) = match (&a.path, a.walk) {
+        (Some(file), _) => (read_path(file)?, file.clone()),
+        (None, Some(kind)) => {
+            let grid = db.grid().ok_or_else(|| Error::bad_file(&a.db, "holds no grid to walk"))?;
+            let walk = hdov::city::walk(grid, kind, a.steps as usize);
+            (walk.into_iter().enumerate().map(|(i, (at, look))| (i, at, Some(look))).collect(), a.db.clone())
+        }
+        (None, None) => return Err(Error::bad_param("path", "give --path FILE or --walk KIND")),
+    };
     let method = match a.method {
         WalkMethod::Visual => Method::Visual,
         WalkMethod::Review => Method::Review(ReviewParams {
@@ -240,7 +257,7 @@ pub fn walk(a: WalkCmd) -> Result<()> {
     for (line, at, look) in path {
         let mut step = session.step(at, look).map_err(|e| match e {
             Error::BadParam { param, reason } if param == "at" => {
-                Error::bad_file(&a.path, format!("line {line}: {reason}"))
+                Error::bad_file(&source, format!("line {line}: {reason}"))
             }
             e => e,
         })?;

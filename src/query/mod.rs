@@ -267,7 +267,7 @@ impl Database {
         access.reset_io();
         access.flip(cell_id)?;
         let cell_box = self.grid().map_or(Aabb::new(at, at), |g| g.cell_box(cell));
-        let mut out = traverse::run(self, access, at, cell_box, params)?;
+        let mut out = traverse::run(self, access, at, cell_box, params, cull)?;
         if let Some(cam) = params.camera.as_ref().filter(|_| cull) {
             let frustum = cam.frustum(at);
             out.items.retain(|i| frustum.meets(&i.mbr));

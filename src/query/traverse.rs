@@ -21,15 +21,23 @@ pub(super) struct Found {
     pub over_budget: bool,
 }
 
-/// Runs `params.mode` from `at` in the cell `access` has selected, whose box is `cell_box`.
-pub(super) fn run(db: &Database, access: &mut Access, at: Vec3, cell_box: Aabb, params: &QueryParams) -> Result<Found> {
+/// Runs `params.mode` from `at` in the cell `access` has selected, whose box is `cell_box`;
+/// frustum mode culls to the camera only if `cull`.
+pub(super) fn run(
+    db: &Database,
+    access: &mut Access,
+    at: Vec3,
+    cell_box: Aabb,
+    params: &QueryParams,
+    cull: bool,
+) -> Result<Found> {
     let mut t = Traversal { db, access, at, cell_box, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
     let mut over_budget = false;
     match params.mode {
         Mode::Threshold | Mode::Vmsse => t.descend(0, 1.0)?,
         Mode::Naive => t.naive()?,
         Mode::Frustum => {
-            let frustum = params.camera.map(|c| c.frustum(at));
+            let frustum = params.camera.filter(|_| cull).map(|c| c.frustum(at));
             t.frustum(0, frustum.as_ref())?
         }
         Mode::Budget => over_budget = t.budget_root()?,

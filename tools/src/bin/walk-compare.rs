@@ -213,9 +213,9 @@ fn walk_one(
 fn print_table(rows: &[Row]) {
     let frustum_faces = mean(&rows[0].faces);
     println!(
-        "| method | step µs, mean | step µs², variance | pages read | faces drawn, mean | of frustum culling's | resident MB, mean / max | draw ms, mean | PSNR dB, mean (min) | frames ≥ 35 dB | coverage diff, mean |"
+        "| method | step µs, mean | step µs², variance | pages read | faces drawn, mean | of frustum culling's | resident MB, mean / max | draw ms, mean | frame ms, mean ± sd | PSNR dB, mean (min) | frames ≥ 35 dB | coverage diff, mean |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         // Equal frames have PSNR ∞; the mean is over MSE (so ∞ frames count as zero error).
         let psnr = if r.psnr.is_empty() {
@@ -231,8 +231,15 @@ fn print_table(rows: &[Row]) {
         };
         let coverage = if r.coverage.is_empty() { "–".into() } else { format!("{:.4}", mean(&r.coverage)) };
         let draw = if r.draw_ms.is_empty() { "–".into() } else { format!("{:.0}", mean(&r.draw_ms)) };
+        // A frame's cost: the step (query, loading, culling) and drawing what it chose.
+        let frame: Vec<f64> = r.draw_ms.iter().zip(&r.micros).map(|(d, us)| d + us / 1e3).collect();
+        let frame = if frame.is_empty() {
+            "–".into()
+        } else {
+            format!("{:.0} ± {:.0}", mean(&frame), variance(&frame).sqrt())
+        };
         println!(
-            "| {} | {:.0} | {:.0} | {} | {:.0} | {:.1} % | {:.2} / {:.2} | {} | {} | {} | {} |",
+            "| {} | {:.0} | {:.0} | {} | {:.0} | {:.1} % | {:.2} / {:.2} | {} | {} | {} | {} | {} |",
             r.name,
             mean(&r.micros),
             variance(&r.micros),
@@ -242,6 +249,7 @@ fn print_table(rows: &[Row]) {
             r.mean_resident / 1e6,
             r.max_resident as f64 / 1e6,
             draw,
+            frame,
             psnr,
             good,
             coverage
