@@ -327,7 +327,9 @@ mod tests {
         assert!(with(|v| v.interior_samples = 5000).starts_with("interior_samples:"));
         assert!(with(|v| v.layouts.clear()).starts_with("layouts:"));
         assert!(with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 0, budget: 4 })).starts_with("interior_samples:"));
-        assert!(with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 2, budget: 5000 })).starts_with("interior_samples:"));
+        assert!(
+            with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 2, budget: 5000 })).starts_with("interior_samples:")
+        );
         assert!(with(|v| v.layouts.push(LayoutKind::Vertical)).contains("twice"));
         assert!(with(|v| v.lod_draw_tolerance = f32::NAN).starts_with("lod_draw_tolerance:"));
         let page = BuildParams { page_size: 64, ..Default::default() };

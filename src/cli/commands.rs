@@ -168,9 +168,9 @@ fn parse_samples(s: &str) -> std::result::Result<Samples, String> {
     if s.starts_with("adaptive") {
         return s.parse().map(Samples::Adaptive);
     }
-    s.parse().map(Samples::Interior).map_err(|_| {
-        format!("'{s}' is neither 'corners', a number of interior points, nor adaptive[:SEEDS:BUDGET]")
-    })
+    s.parse()
+        .map(Samples::Interior)
+        .map_err(|_| format!("'{s}' is neither 'corners', a number of interior points, nor adaptive[:SEEDS:BUDGET]"))
 }
 
 #[derive(Args)]

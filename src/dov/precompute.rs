@@ -430,11 +430,8 @@ pub fn cell_dov(
 
     let mut floored = 0;
     if !options.zero_dov_tests.is_empty() {
-        let seen_around: HashSet<u32> = if options.uses_neighbours() {
-            seen_by(around.iter().copied())
-        } else {
-            Default::default()
-        };
+        let seen_around: HashSet<u32> =
+            if options.uses_neighbours() { seen_by(around.iter().copied()) } else { Default::default() };
         let floor = cube.texel_floor();
         for (object, bounds) in object_bounds.iter().enumerate() {
             let object = object as u32;

@@ -219,8 +219,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             c.over_tolerance
         );
     }
-    println!("true (cell, object) pairs: {}; load average now: {}", truth.iter().map(|c| c.objects.len()).sum::<usize>(), {
-        std::fs::read_to_string("/proc/loadavg").unwrap_or_default().split_whitespace().take(3).collect::<Vec<_>>().join(" ")
-    });
+    println!(
+        "true (cell, object) pairs: {}; load average now: {}",
+        truth.iter().map(|c| c.objects.len()).sum::<usize>(),
+        {
+            std::fs::read_to_string("/proc/loadavg")
+                .unwrap_or_default()
+                .split_whitespace()
+                .take(3)
+                .collect::<Vec<_>>()
+                .join(" ")
+        }
+    );
     Ok(())
 }
