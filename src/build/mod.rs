@@ -232,6 +232,7 @@ fn build_visibility(
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions {
         interior_samples: v.interior_samples,
+        adaptive: v.adaptive,
         zero_dov_tests: v.zero_dov_floor.clone(),
         ..Default::default()
     };

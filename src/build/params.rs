@@ -8,6 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::dov::BackendKind;
+use crate::dov::adaptive::AdaptiveSampling;
 use crate::dov::precompute::{FloorTest, Shard};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
@@ -76,6 +77,10 @@ pub struct VisibilityParams {
     pub backend: BackendKind,
     /// Stratified interior sample points per cell, besides the 8 shared corners.
     pub interior_samples: u32,
+    /// Adaptive sample points per cell after the corners (`"adaptive:SEEDS:BUDGET"` in the
+    /// manifest, absent when off, so manifests of other builds are unchanged).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive: Option<AdaptiveSampling>,
     /// Layouts to write.
     #[serde(with = "names")]
     pub layouts: Vec<LayoutKind>,
@@ -99,6 +104,7 @@ impl Default for VisibilityParams {
             resolution: 128,
             backend: BackendKind::Auto,
             interior_samples: 0,
+            adaptive: None,
             layouts: LayoutKind::ALL.to_vec(),
             dov_codec: DovCodec::F32,
             shard: None,
@@ -155,6 +161,15 @@ impl BuildParams {
                 format!("{} is above {MAX_INTERIOR_SAMPLES} per cell", v.interior_samples),
             ));
         }
+        if let Some(a) = v.adaptive {
+            AdaptiveSampling::new(a.seeds, a.budget).map_err(|r| Error::bad_param("interior_samples", r))?;
+            if a.budget > MAX_INTERIOR_SAMPLES {
+                return Err(Error::bad_param(
+                    "interior_samples",
+                    format!("{a}: a budget above {MAX_INTERIOR_SAMPLES} per cell"),
+                ));
+            }
+        }
         if v.layouts.is_empty() {
             return Err(Error::bad_param("layouts", "names no layout"));
         }
@@ -180,7 +195,8 @@ impl BuildParams {
             }
         }
         if let Some(g) = grid {
-            check_grid(g, v.interior_samples)?;
+            // The adaptive budget is the most a cell can take.
+            check_grid(g, v.interior_samples + v.adaptive.map_or(0, |a| a.budget))?;
         }
         Ok(())
     }
@@ -266,6 +282,7 @@ mod tests {
                 shard: Some(Shard::new(1, 3).unwrap()),
                 zero_dov_floor: vec![FloorTest::BoxWithin(2.5), FloorTest::NeighbourCorners],
                 dov_codec: DovCodec::LogU16,
+                adaptive: Some(AdaptiveSampling { seeds: 3, budget: 24 }),
                 ..Default::default()
             }),
             ..Default::default()
@@ -276,7 +293,18 @@ mod tests {
         assert_eq!(v["zero_dov_floor"], serde_json::json!(["box:2.5", "neighbours"]));
         assert_eq!(v["shard"], serde_json::json!([1, 3]));
         assert_eq!(v["dov_codec"], "log-u16");
+        assert_eq!(v["adaptive"], "adaptive:3:24");
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+    }
+
+    #[test]
+    fn manifests_without_adaptive_sampling_read_and_write_unchanged() {
+        let json = serde_json::to_value(BuildParams::default()).unwrap();
+        assert!(json["visibility"].get("adaptive").is_none());
+        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap().visibility.unwrap().adaptive, None);
+        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
+        json["visibility"]["adaptive"] = serde_json::json!("adaptive:0:3");
+        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("SEEDS"));
     }
 
     #[test]
@@ -298,6 +326,10 @@ mod tests {
         assert!(with(|v| v.resolution = 100_000).starts_with("resolution:"));
         assert!(with(|v| v.interior_samples = 5000).starts_with("interior_samples:"));
         assert!(with(|v| v.layouts.clear()).starts_with("layouts:"));
+        assert!(with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 0, budget: 4 })).starts_with("interior_samples:"));
+        assert!(
+            with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 2, budget: 5000 })).starts_with("interior_samples:")
+        );
         assert!(with(|v| v.layouts.push(LayoutKind::Vertical)).contains("twice"));
         assert!(with(|v| v.lod_draw_tolerance = f32::NAN).starts_with("lod_draw_tolerance:"));
         let page = BuildParams { page_size: 64, ..Default::default() };

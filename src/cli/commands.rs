@@ -9,6 +9,7 @@ use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
 use hdov::db::Manifest;
 use hdov::dov::BackendKind;
+use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{FloorTest, Shard};
 use hdov::error::{Error, Result};
 use hdov::geom::Aabb;
@@ -94,10 +95,11 @@ pub struct VisibilityArgs {
     /// Texels per cube-face edge for the DoV measurement.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
-    /// Sample points per cell: `corners` (the 8 shared corners) or a number K of stratified
-    /// interior points in addition to the corners.
+    /// Sample points per cell: `corners` (the 8 shared corners), a number K of stratified
+    /// interior points in addition to the corners, or `adaptive[:SEEDS:BUDGET]`: points where new
+    /// objects appear, at most BUDGET per cell (docs/dov.md).
     #[arg(long, default_value = "corners", value_parser = parse_samples)]
-    samples: u32,
+    samples: Samples,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
     #[arg(long, default_value = "auto")]
     backend: BackendKind,
@@ -133,7 +135,14 @@ impl VisibilityArgs {
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
-            interior_samples: self.samples,
+            interior_samples: match self.samples {
+                Samples::Interior(k) => k,
+                Samples::Adaptive(_) => 0,
+            },
+            adaptive: match self.samples {
+                Samples::Adaptive(a) => Some(a),
+                Samples::Interior(_) => None,
+            },
             layouts: self.layouts.clone(),
             dov_codec: self.dov_codec,
             shard: self.shard,
@@ -145,11 +154,23 @@ impl VisibilityArgs {
     }
 }
 
-fn parse_samples(s: &str) -> std::result::Result<u32, String> {
+/// What `--samples` chose: fixed interior points (0 = corners only) or the adaptive sampler.
+#[derive(Clone, Copy, Debug)]
+enum Samples {
+    Interior(u32),
+    Adaptive(AdaptiveSampling),
+}
+
+fn parse_samples(s: &str) -> std::result::Result<Samples, String> {
     if s == "corners" {
-        return Ok(0);
+        return Ok(Samples::Interior(0));
     }
-    s.parse().map_err(|_| format!("'{s}' is neither 'corners' nor a number of interior points"))
+    if s.starts_with("adaptive") {
+        return s.parse().map(Samples::Adaptive);
+    }
+    s.parse()
+        .map(Samples::Interior)
+        .map_err(|_| format!("'{s}' is neither 'corners', a number of interior points, nor adaptive[:SEEDS:BUDGET]"))
 }
 
 #[derive(Args)]

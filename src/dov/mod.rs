@@ -5,8 +5,10 @@
 //! - [`DovBackend`]: renders an *id cube* (one object id per texel) around a point; two
 //!   independent implementations, [`cpu::CpuBackend`] (ray casting over a BVH) and
 //!   [`gpu::GpuBackend`] (wgpu rasterisation), which must agree;
+//! - [`adaptive`]: extra sample points where new objects appear, per cell;
 //! - [`precompute`]: from-region DoV of objects and tree nodes for every cell of a view grid.
 
+pub mod adaptive;
 pub mod cpu;
 pub mod cubemap;
 pub mod gpu;

@@ -18,6 +18,7 @@ use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 
+use super::adaptive::{AdaptiveSampling, sample_cell};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
@@ -217,6 +218,9 @@ pub struct PrecomputeOptions {
     /// Interior sample points per cell besides the 8 corners (Halton points in bases 2, 3, 5:
     /// well spread, the same relative positions in every cell). 0 = corners only (the thesis).
     pub interior_samples: u32,
+    /// After the corners and the fixed interior points, measure more points where new objects
+    /// appear ([`super::adaptive`]). `None`: no adaptive points.
+    pub adaptive: Option<AdaptiveSampling>,
     /// Objects that no sample point sees but any of these tests finds possibly visible get the
     /// one-texel floor. Empty: no floor.
     pub zero_dov_tests: Vec<FloorTest>,
@@ -230,6 +234,7 @@ impl Default for PrecomputeOptions {
     fn default() -> Self {
         Self {
             interior_samples: 0,
+            adaptive: None,
             zero_dov_tests: vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
             skip_inside_points: true,
         }
@@ -257,8 +262,13 @@ pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3]) -> Vec<usize> {
     out
 }
 
+/// The objects that the points outside geometry see.
+fn seen_by<'a>(points: impl Iterator<Item = &'a PointDov>) -> HashSet<u32> {
+    points.filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect()
+}
+
 /// Whether a sample point's view counts (see [`PrecomputeOptions::skip_inside_points`]).
-fn is_inside(p: &PointDov) -> bool {
+pub(crate) fn is_inside(p: &PointDov) -> bool {
     p.back_face > 0.5
 }
 
@@ -298,7 +308,9 @@ pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
 /// [`FloorTest::NeighbourCorners`] — is measured exactly once and kept until the last cell that
 /// uses it is done (memory: about two layers of corners, four with the neighbour test); interior
 /// points are measured once per cell. `progress` is called with `(points done, points total)`
-/// after each measurement. Costs (distinct corners + K·cells) backend measurements plus, per cell,
+/// after each measurement (with [`PrecomputeOptions::adaptive`] the total grows as cells take
+/// more than their seeds). Costs (distinct corners + K·cells + adaptive points) backend
+/// measurements plus, per cell,
 /// O(visible objects × tree depth × points + objects) for the floor tests.
 pub fn precompute_shard(
     backend: &mut dyn DovBackend,
@@ -315,7 +327,8 @@ pub fn precompute_shard(
         return Err(Error::bad_param("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
     let cells = shard.cells(grid);
-    let neighbours = options.uses_neighbours();
+    // The adaptive sampler takes its candidates from the neighbours' corners too.
+    let neighbours = options.uses_neighbours() || options.adaptive.is_some();
     let corners_of = |coords: [u32; 3]| -> Vec<usize> {
         if neighbours { neighbourhood_corners(grid, coords) } else { grid.cell_corners(coords).to_vec() }
     };
@@ -326,7 +339,9 @@ pub fn precompute_shard(
             *corner_uses.entry(c).or_insert(0) += 1;
         }
     }
-    let total = corner_uses.len() + cells.len() * options.interior_samples as usize;
+    // The adaptive sampler's count is known only when it stops: plan with its seeds.
+    let per_cell = options.interior_samples + options.adaptive.map_or(0, |a| a.seeds);
+    let mut total = corner_uses.len() + cells.len() * per_cell as usize;
     let mut done = 0;
     let mut corner_dov: HashMap<usize, PointDov> = HashMap::new();
     let cube = backend.cube_map().clone();
@@ -350,6 +365,19 @@ pub fn precompute_shard(
             progress(done, total);
         }
         let own = grid.cell_corners(coords);
+        if let Some(sampling) = &options.adaptive {
+            let known: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
+            let candidates = seen_by(needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]));
+            let planned = sampling.seeds as usize;
+            let mut taken = 0;
+            let extra = sample_cell(backend, &cell_box, &known, &candidates, sampling, &mut || {
+                done += 1;
+                taken += 1;
+                total += usize::from(taken > planned);
+                progress(done, total);
+            })?;
+            interior.extend(extra);
+        }
         let points: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
         let around: Vec<&PointDov> = needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]).collect();
         out.cells.push((id as u32, cell_dov(&points, &around, &cell_box, object_bounds, shape, options, &cube)));
@@ -402,11 +430,8 @@ pub fn cell_dov(
 
     let mut floored = 0;
     if !options.zero_dov_tests.is_empty() {
-        let seen_around: HashSet<u32> = if options.uses_neighbours() {
-            around.iter().filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect()
-        } else {
-            Default::default()
-        };
+        let seen_around: HashSet<u32> =
+            if options.uses_neighbours() { seen_by(around.iter().copied()) } else { Default::default() };
         let floor = cube.texel_floor();
         for (object, bounds) in object_bounds.iter().enumerate() {
             let object = object as u32;
@@ -444,6 +469,43 @@ pub fn cell_dov(
 /// `d` as f32, never rounded down to 0 (an entry that exists means "visible") and never above 1.
 fn positive_f32(d: f64) -> f32 {
     (d as f32).clamp(f32::MIN_POSITIVE, 1.0)
+}
+
+/// Where the reference points of [`dense_cells`] start in the Halton sequence: far from the
+/// points 1, 2, … that the samplers take, so no sampler point is also a reference point.
+pub const DENSE_HALTON_START: u32 = 1001;
+
+/// The reference from-region DoV of each cell in `cells`: the max over its 8 corners and `dense`
+/// Halton points ([`DENSE_HALTON_START`] on), without floors, points inside geometry left out as
+/// in [`precompute_shard`]. Node entries use `shape`. Costs one measurement per distinct corner
+/// plus `dense` per cell.
+pub fn dense_cells(
+    backend: &mut dyn DovBackend,
+    grid: &ViewGrid,
+    object_bounds: &[Aabb],
+    shape: &TreeShape,
+    cells: impl IntoIterator<Item = usize>,
+    dense: u32,
+) -> Result<Vec<CellDov>> {
+    let cube = backend.cube_map().clone();
+    let options = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
+    let mut corners: HashMap<usize, PointDov> = HashMap::new();
+    let mut out = Vec::new();
+    for id in cells {
+        let coords = grid.cell_coords(id);
+        let cell = grid.cell_box(coords);
+        for c in grid.cell_corners(coords) {
+            if let Entry::Vacant(slot) = corners.entry(c) {
+                slot.insert(backend.measure(grid.corner_position(grid.corner_coords(c)))?);
+            }
+        }
+        let interior: Vec<PointDov> = (DENSE_HALTON_START..DENSE_HALTON_START + dense)
+            .map(|k| backend.measure(cell.min + halton3(k) * cell.extent()))
+            .collect::<Result<_>>()?;
+        let points: Vec<&PointDov> = grid.cell_corners(coords).iter().map(|c| &corners[c]).chain(&interior).collect();
+        out.push(cell_dov(&points, &[], &cell, object_bounds, shape, &options, &cube));
+    }
+    Ok(out)
 }
 
 /// How well sparse sampling and a floor test match dense sampling, over some cells.

@@ -1,0 +1,117 @@
+//! The adaptive from-region sampler (src/dov/adaptive.rs) against dense interior sampling on
+//! small random scenes of boxes behind walls, and inside a build.
+
+mod dov_common;
+
+use dov_common::*;
+use glam::Vec3;
+use hdov::dov::adaptive::AdaptiveSampling;
+use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard};
+use hdov::dov::{CpuBackend, DovBackend};
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
+use proptest::prelude::*;
+
+/// 2 × 1 × 2 cells of 2 × 0.5 × 2 at eye height around the origin.
+fn grid() -> ViewGrid {
+    ViewGrid::new(Aabb::new(Vec3::new(-2.0, 1.5, -2.0), Vec3::new(2.0, 2.0, 2.0)), [2, 1, 2])
+}
+
+/// `walls` thin walls 4–6 from the grid's centre (each with its long side across the view), and
+/// `boxes` boxes 0.3–2 wide 7–14 away, behind or beside them: objects seen through the gaps
+/// between walls from part of a cell only.
+fn walls_and_boxes(seed: u64, walls: usize, boxes: usize) -> hdov::scene::Scene {
+    let mut rng = Rng(seed);
+    let mut b = SceneBuilder::default();
+    for _ in 0..walls {
+        let angle = rng.range(0.0, std::f32::consts::TAU);
+        let (d, half, h) = (rng.range(4.0, 6.0), rng.range(0.5, 3.0), rng.range(1.0, 4.0));
+        let c = Vec3::new(angle.cos() * d, 0.0, angle.sin() * d);
+        // Across the view: the long side along the axis the centre direction is less along.
+        let half_extent = if c.x.abs() > c.z.abs() { Vec3::new(0.1, 0.0, half) } else { Vec3::new(half, 0.0, 0.1) };
+        b.aabox(c - half_extent, c + half_extent + Vec3::Y * h);
+    }
+    for _ in 0..boxes {
+        let angle = rng.range(0.0, std::f32::consts::TAU);
+        let (d, w, h) = (rng.range(7.0, 14.0), rng.range(0.3, 2.0), rng.range(0.5, 3.0));
+        let c = Vec3::new(angle.cos() * d, 0.0, angle.sin() * d);
+        b.aabox(c - Vec3::new(w, 0.0, w) * 0.5, c + Vec3::new(w * 0.5, h, w * 0.5));
+    }
+    b.build()
+}
+
+fn flat_shape(objects: usize) -> TreeShape {
+    TreeShape {
+        object_leaf: (0..objects as u32).collect(),
+        node_parent: (0..=objects).map(|n| (n < objects).then_some(objects as u32)).collect(),
+    }
+}
+
+const R: u32 = 32;
+const DENSE: u32 = 64;
+/// Objects whose dense cell DoV is at least this many centre texels must be found. Below it an
+/// object is a sliver seen by one or two of the 64 dense points (a point sampler's detection of
+/// it is luck, docs/dov.md, sub-texel features); above it, missing it pops in something visible.
+const TOLERANCE_TEXELS: f64 = 8.0;
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    /// Every (cell, object) pair that dense sampling sees with a DoV ≥ TOLERANCE_TEXELS, the
+    /// adaptive sampler sees too (by a sample point, no floor).
+    #[test]
+    fn adaptive_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
+        let scene = walls_and_boxes(seed, walls, boxes);
+        let bounds = scene.all_object_bounds();
+        let shape = flat_shape(bounds.len());
+        let grid = grid();
+        let mut backend = CpuBackend::new(&scene, R).unwrap();
+        let texel = backend.cube_map().texel_floor();
+        let truth = dense_cells(&mut backend, &grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
+        let options = PrecomputeOptions {
+            adaptive: Some(AdaptiveSampling::new(2, 32).unwrap()),
+            zero_dov_tests: vec![],
+            ..Default::default()
+        };
+        let got = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+        for (t, (cell, g)) in truth.iter().zip(&got.cells) {
+            for &(object, dov) in &t.objects {
+                if f64::from(dov) >= TOLERANCE_TEXELS * texel {
+                    prop_assert!(
+                        g.object(object) > 0.0,
+                        "cell {cell}: object {object} (dense DoV {:.1} texels) not found", f64::from(dov) / texel
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The adaptive points come on top of the corners: the build measures the corners of the cells
+/// and their neighbours once each, plus between `seeds` and `budget` points per cell, and every
+/// object the corners see keeps at least the corner-only DoV.
+#[test]
+fn adaptive_build_counts_and_keeps_the_corner_dov() {
+    let scene = walls_and_boxes(3, 3, 8);
+    let bounds = scene.all_object_bounds();
+    let shape = flat_shape(bounds.len());
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(-2.0, 1.5, -2.0), Vec3::new(2.0, 2.0, 2.0)), [2, 1, 2]);
+    let mut backend = CpuBackend::new(&scene, R).unwrap();
+    let corners_only = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
+    let sampling = AdaptiveSampling::new(2, 6).unwrap();
+    let adaptive = PrecomputeOptions { adaptive: Some(sampling), ..corners_only.clone() };
+    let run = |b: &mut dyn DovBackend, o: &PrecomputeOptions| {
+        precompute_shard(b, &grid, &bounds, &shape, o, Shard::ALL, &mut |_, _| {}).unwrap()
+    };
+    let base = run(&mut backend, &corners_only);
+    let more = run(&mut backend, &adaptive);
+    let corners = grid.corner_count();
+    assert_eq!(base.points_measured, corners);
+    let extra = more.points_measured - corners;
+    assert!((2 * 4..=6 * 4).contains(&extra), "{extra} adaptive points over 4 cells");
+    for ((_, a), (_, b)) in base.cells.iter().zip(&more.cells) {
+        for &(object, dov) in &a.objects {
+            assert!(b.object(object) >= dov, "object {object}: {} < corner DoV {dov}", b.object(object));
+        }
+    }
+}

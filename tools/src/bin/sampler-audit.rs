@@ -1,0 +1,235 @@
+//! From-region samplers against dense interior sampling: per scene, for corners only (with the
+//! box floor and with the neighbour floor), fixed interior points and the adaptive sampler, the
+//! rate of visible (cell, object) pairs that no sample point sees (misses), the false floors, the
+//! distance of the cell DoV from the dense max, and the cost (points measured, build time) against
+//! corners only. The numbers of docs/dov.md, "Adaptive sampling".
+//!
+//! `cargo run --release -p hdov-tools --bin sampler-audit -- SCENE [R] [SHARD I/N] [DENSE] [SAMPLERS]`
+//!
+//! SCENE: `audit` (tests/dov_audit.rs's street block), `fence` (a picket fence of bars 0.25–8
+//! texels wide in front of small objects) or `city` (the default generated city, one shard of its
+//! cells). SAMPLERS: comma-separated `corners`, `neighbours` (corners + the neighbour floor), K
+//! (interior points) or `adaptive[:SEEDS:BUDGET]`.
+//!
+//! Dense truth ([`dense_cells`]): per cell, the 8 corners and DENSE (default 64) Halton points
+//! from 1001 on (bases 2, 3, 5): a different part of the sequence from the samplers' points 1…,
+//! so that no sampler point coincides with a truth point. Points inside geometry are left out as
+//! in the build. Misses are also counted among pairs whose dense DoV is ≥ 4 centre texels.
+
+#[path = "../../../tests/dov_common/mod.rs"]
+mod dov_common;
+
+use std::time::Instant;
+
+use glam::Vec3;
+use hdov::city::{CityParams, CityScale};
+use hdov::dov::adaptive::AdaptiveSampling;
+use hdov::dov::precompute::{
+    CellDov, DENSE_HALTON_START, FloorTest, PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard,
+};
+use hdov::dov::{CpuBackend, CubeMap, DovBackend};
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
+use hdov::scene::Scene;
+
+/// One row of the table: a way of sampling.
+#[derive(Clone, Copy, Debug)]
+enum Sampler {
+    Corners { neighbours: bool },
+    Interior(u32),
+    Adaptive(AdaptiveSampling),
+}
+
+impl Sampler {
+    fn parse(s: &str) -> Result<Sampler, String> {
+        match s {
+            "corners" => Ok(Sampler::Corners { neighbours: false }),
+            "neighbours" => Ok(Sampler::Corners { neighbours: true }),
+            _ if s.starts_with("adaptive") => s.parse().map(Sampler::Adaptive),
+            _ => s.parse().map(Sampler::Interior).map_err(|_| format!("unknown sampler '{s}'")),
+        }
+    }
+
+    fn name(&self) -> String {
+        match self {
+            Sampler::Corners { neighbours: false } => "corners + box floor".into(),
+            Sampler::Corners { neighbours: true } => "corners + box, neighbours floors".into(),
+            Sampler::Interior(k) => format!("corners + {k} interior + box floor"),
+            Sampler::Adaptive(a) => format!("corners + {a} + box floor"),
+        }
+    }
+
+    fn options(&self) -> PrecomputeOptions {
+        let mut o = PrecomputeOptions { zero_dov_tests: vec![FloorTest::BoxWithin(0.0)], ..Default::default() };
+        match *self {
+            Sampler::Corners { neighbours } if neighbours => o.zero_dov_tests.push(FloorTest::NeighbourCorners),
+            Sampler::Corners { .. } => {}
+            Sampler::Interior(k) => o.interior_samples = k,
+            Sampler::Adaptive(a) => o.adaptive = Some(a),
+        }
+        o
+    }
+}
+
+/// A picket fence in front of small objects, sized in texels of a cube map of resolution `r` seen
+/// from the grid's middle: bars 0.25, 0.5, 1, 2, 4, 8 texels wide (cycled), gaps 0.5–4 bars wide,
+/// 10 units from the grid's far edge; behind it 40 posts and boxes, 0.1–0.8 wide, then a back
+/// wall. The ground is a slab. Returns the scene and its grid (4 × 1 × 4 cells of 2 × 0.5 × 2).
+fn fence_scene(r: u32) -> (Scene, ViewGrid) {
+    let mut b = dov_common::SceneBuilder::default();
+    b.aabox(Vec3::new(-30.0, -1.0, -10.0), Vec3::new(40.0, 0.0, 50.0));
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.5, 0.0), Vec3::new(8.0, 2.0, 8.0)), [4, 1, 4]);
+    let fence_z = 18.0;
+    // One texel at the face centre, seen from the grid's middle (z = 4): 2/R radians.
+    let texel = (fence_z - 4.0) * 2.0 / r as f32;
+    let widths = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
+    let mut rng = dov_common::Rng(7);
+    let (mut x, mut i) = (-20.0f32, 0);
+    while x < 28.0 {
+        let w = widths[i % widths.len()] * texel;
+        b.aabox(Vec3::new(x, 0.0, fence_z), Vec3::new(x + w, 3.0, fence_z + 0.05));
+        x += w + rng.range(0.5, 4.0) * w.max(texel);
+        i += 1;
+    }
+    for _ in 0..40 {
+        let (px, pz) = (rng.range(-15.0, 23.0), rng.range(fence_z + 1.0, fence_z + 14.0));
+        let (w, h) = (rng.range(0.1, 0.8), rng.range(0.5, 2.8));
+        b.aabox(Vec3::new(px, 0.0, pz), Vec3::new(px + w, h, pz + w));
+    }
+    b.aabox(Vec3::new(-30.0, 0.0, fence_z + 16.0), Vec3::new(40.0, 5.0, fence_z + 16.5));
+    (b.build(), grid)
+}
+
+/// Each object its own leaf under one root: the samplers' object entries do not depend on the
+/// tree, and node DoVs are not compared here.
+fn flat_shape(objects: usize) -> TreeShape {
+    TreeShape {
+        object_leaf: (0..objects as u32).collect(),
+        node_parent: (0..=objects).map(|n| (n < objects).then_some(objects as u32)).collect(),
+    }
+}
+
+/// How one sampler's cells compare with the truth.
+#[derive(Default)]
+struct Compare {
+    truth_pairs: usize,
+    missed: usize,
+    missed_large: usize,
+    not_stored: usize,
+    false_floors: usize,
+    deficit_sum_rel: f64,
+    deficit_max: f64,
+    over_tolerance: usize,
+    found: usize,
+}
+
+fn compare(truth: &[CellDov], got: &[(u32, CellDov)], cube: &CubeMap) -> Compare {
+    let texel = cube.texel_floor();
+    let floor = texel as f32;
+    let mut c = Compare::default();
+    for (t, (_, g)) in truth.iter().zip(got) {
+        c.truth_pairs += t.objects.len();
+        for &(object, dense) in &t.objects {
+            let v = g.object(object);
+            // A floored entry is stored (fetched at η ≤ floor) but was not sampled.
+            if v == 0.0 || (v == floor && dense > floor) {
+                c.missed += 1;
+                c.missed_large += usize::from(dense as f64 >= 4.0 * texel);
+                c.not_stored += usize::from(v == 0.0);
+                continue;
+            }
+            let deficit = (dense - v).max(0.0) as f64;
+            c.found += 1;
+            c.deficit_sum_rel += deficit / dense as f64;
+            c.deficit_max = c.deficit_max.max(deficit);
+            c.over_tolerance += usize::from(deficit > 0.005 * dense as f64 + 2.0 * texel);
+        }
+        c.false_floors += g.objects.iter().filter(|&&(o, v)| v == floor && t.object(o) == 0.0).count();
+    }
+    c
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let scene_name = args.first().map_or("audit", String::as_str);
+    let r: u32 = args.get(1).map(|s| s.parse()).transpose()?.unwrap_or(64);
+    let shard: Shard = args.get(2).map_or(Ok(Shard::ALL), |s| s.parse())?;
+    let dense: u32 = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(64);
+    let samplers: Vec<Sampler> = args
+        .get(4)
+        .map_or("corners,neighbours,4,16,adaptive", String::as_str)
+        .split(',')
+        .map(Sampler::parse)
+        .collect::<Result<_, _>>()?;
+    let (scene, grid) = match scene_name {
+        "audit" => (
+            dov_common::city_block(6, true),
+            ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
+        ),
+        "fence" => fence_scene(r),
+        "city" => {
+            let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
+            let grid = scene.grid.clone().ok_or("the city brings a grid")?;
+            (scene, grid)
+        }
+        other => return Err(format!("unknown scene '{other}': expected audit, fence or city").into()),
+    };
+    println!("{}", hdov_tools::machine());
+    let bounds = scene.all_object_bounds();
+    let shape = flat_shape(bounds.len());
+    let mut backend = CpuBackend::new(&scene, r)?;
+    let cube = backend.cube_map().clone();
+    let cells = shard.cells(&grid);
+    println!(
+        "scene {scene_name}: {} objects, cells {cells:?} of {} ({:?}), R = {r}, CPU backend, truth: corners + {dense} Halton points per cell",
+        bounds.len(),
+        grid.cell_count(),
+        grid.dims
+    );
+    let t = Instant::now();
+    let truth = dense_cells(&mut backend, &grid, &bounds, &shape, shard.cells(&grid), dense)?;
+    println!("truth (Halton points from {DENSE_HALTON_START}): {:.1} s", t.elapsed().as_secs_f64());
+    println!(
+        "| sampler | points / cell | time (s) | time / corners | misses (rate) | misses ≥ 4 texels | not stored | false floors (% of true) | mean DoV deficit | max deficit (texels) | beyond 0.5 % + 2 texels |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut corner_time = None;
+    for sampler in samplers {
+        let t = Instant::now();
+        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &sampler.options(), shard, &mut |_, _| {})?;
+        let secs = t.elapsed().as_secs_f64();
+        let base = *corner_time.get_or_insert(secs);
+        let c = compare(&truth, &out.cells, &cube);
+        let pct = |n: usize| 100.0 * n as f64 / c.truth_pairs.max(1) as f64;
+        println!(
+            "| {} | {:.2} | {secs:.1} | {:.2}× | {} ({:.2} %) | {} ({:.2} %) | {} ({:.2} %) | {} ({:.1} %) | {:.2} % | {:.1} | {} |",
+            sampler.name(),
+            out.points_measured as f64 / cells.len() as f64,
+            secs / base,
+            c.missed,
+            pct(c.missed),
+            c.missed_large,
+            pct(c.missed_large),
+            c.not_stored,
+            pct(c.not_stored),
+            c.false_floors,
+            pct(c.false_floors),
+            100.0 * c.deficit_sum_rel / c.found.max(1) as f64,
+            c.deficit_max / cube.texel_floor(),
+            c.over_tolerance
+        );
+    }
+    println!(
+        "true (cell, object) pairs: {}; load average now: {}",
+        truth.iter().map(|c| c.objects.len()).sum::<usize>(),
+        {
+            std::fs::read_to_string("/proc/loadavg")
+                .unwrap_or_default()
+                .split_whitespace()
+                .take(3)
+                .collect::<Vec<_>>()
+                .join(" ")
+        }
+    );
+    Ok(())
+}
