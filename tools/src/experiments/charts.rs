@@ -110,7 +110,8 @@ fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 /// A tick label: the value itself, or 10^v on a log axis, in a short form.
 fn tick(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
-    if x == 0.0 {
+    // A tick at zero computed as a sum of steps lands a rounding error away from it.
+    if x.abs() < 1e-12 {
         "0".into()
     } else if x.abs() >= 1e5 || x.abs() < 1e-2 {
         format!("{x:.0e}")
