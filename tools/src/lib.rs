@@ -18,3 +18,5 @@ pub fn machine() -> String {
         .map_or(String::from("?"), |kib| format!("{:.0}", kib / 1024.0 / 1024.0));
     format!("Machine: {model}, {cores} cores (nproc), {mem_gib} GiB memory, load average {load} at start.")
 }
+
+pub mod experiments;

@@ -1,0 +1,37 @@
+//! Prefetch on a walkthrough (docs/query.md, "Prefetch"): the continuous street walks of the
+//! caching experiment with and without prefetching, DoV-Time cache of 64 pages. The thesis's
+//! query figures (pages and time against η, cache hit rate against cache size) are drawn by
+//! the experiments harness (`--bin experiments`, docs/results.md).
+//!
+//! `cargo run --release -p hdov-tools --bin prefetch-walk -- DB`
+
+use hdov::{Database, SessionParams};
+use hdov_storage::PolicyKind;
+use hdov_tools::experiments::caching::street_walks;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let db_path = std::env::args().nth(1).ok_or("usage: prefetch-walk DB")?;
+    let db = Database::open(std::path::Path::new(&db_path))?;
+    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let continuous = street_walks(&grid);
+    // Prefetch: the continuous walks with and without it, DoV-Time cache of 64 pages.
+    println!(
+        "\n| prefetch | pages read on arrival | pages prefetched | cache hit rate | step µs p99 |\n|---|---|---|---|---|"
+    );
+    for prefetch in [false, true] {
+        let params =
+            SessionParams { cache: PolicyKind::DOV_TIME, cache_pages: Some(64), prefetch, ..Default::default() };
+        let mut s = db.session(&params)?;
+        let (mut read, mut ahead, mut hits, mut requests, mut micros) = (0, 0, 0, 0, Vec::new());
+        for &at in &continuous {
+            let step = s.step(at, None)?;
+            (read, ahead) = (read + step.pages_read, ahead + step.prefetch_pages);
+            (hits, requests) = (hits + step.cache_hits, requests + step.cache_requests);
+            micros.push(step.micros);
+        }
+        micros.sort_unstable();
+        let p99 = micros[(micros.len() * 99).div_ceil(100).saturating_sub(1)];
+        println!("| {prefetch} | {read} | {ahead} | {:.3} | {p99} |", hits as f64 / requests.max(1) as f64);
+    }
+    Ok(())
+}

@@ -1,0 +1,167 @@
+//! Item 5, thesis figs. 5.24–5.27 and tables 5.3, 6.1: one recorded walk (the city's avenue,
+//! looking +x) by VISUAL at several η, by REVIEW at two disk-cell sizes, and by frustum culling
+//! alone. Per step: query time, geometry loaded, faces drawn and (with an adapter) PSNR against
+//! full detail; per method: the frame-cost proxy's mean and variance.
+//!
+//! The frame-cost proxy adds what a frame waits for: the step's own time (queries, cache),
+//! loading its new geometry at [`DISK_MB_PER_S`] and drawing its faces at [`FACES_PER_S`]
+//! (decision 56). The lead's `walk-compare` tool prints the same walk as one table.
+
+use glam::Vec3;
+use hdov::query::{Camera, Method};
+use hdov::render::{ColorMode, Image, Renderer, View, fidelity};
+use hdov::review::ReviewParams;
+use hdov::{Mode, QueryParams, SessionParams};
+use hdov_storage::PolicyKind;
+
+use super::charts::{Panel, Series};
+use super::{Csv, Ctx, Result, err, mean, variance};
+
+/// Disk read rate of the frame-cost proxy (a 2002 disk read ~20 MB/s; an SSD several hundred).
+pub const DISK_MB_PER_S: f64 = 200.0;
+/// Drawing rate of the frame-cost proxy (a hardware GPU draws hundreds of millions a second;
+/// 100 M/s keeps faces visible in the sum).
+pub const FACES_PER_S: f64 = 100e6;
+/// The walk's image: REVIEW's 45° across.
+const FOV_H_DEG: f32 = 45.0;
+const WIDTH: u32 = 320;
+const HEIGHT: u32 = 200;
+
+pub fn run(ctx: &mut Ctx) -> Result<()> {
+    let (_, db) = ctx.main_database()?;
+    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let steps = if ctx.cfg.scale == super::Scale::Small { 30 } else { 80 };
+    let path = hdov::city::avenue_walk(&grid, steps);
+    let aspect = WIDTH as f32 / HEIGHT as f32;
+    let fov_y = (2.0 * ((FOV_H_DEG.to_radians() / 2.0).tan() / aspect).atan()).to_degrees();
+    let camera = Camera { look: Vec3::X, fov_y_deg: fov_y, aspect, image_height: HEIGHT };
+    let visual = |eta: f64| SessionParams {
+        query: QueryParams { eta, camera: Some(camera), ..QueryParams::default() },
+        cache: PolicyKind::DOV_TIME,
+        ..SessionParams::default()
+    };
+    let review = |review_box: f32, eyesight: f32| SessionParams {
+        method: Method::Review(ReviewParams { review_box, eyesight, fov_deg: FOV_H_DEG, ..ReviewParams::default() }),
+        query: QueryParams { camera: Some(camera), ..QueryParams::default() },
+        cache: PolicyKind::Dplru,
+        ..SessionParams::default()
+    };
+    let frustum = SessionParams {
+        query: QueryParams { mode: Mode::Frustum, camera: Some(camera), ..QueryParams::default() },
+        ..SessionParams::default()
+    };
+    let methods: Vec<(String, SessionParams)> = vec![
+        ("frustum culling".into(), frustum),
+        ("VISUAL η = 0".into(), visual(0.0)),
+        ("VISUAL η = 1e-4".into(), visual(1e-4)),
+        ("VISUAL η = 1e-3".into(), visual(1e-3)),
+        ("VISUAL η = 8e-3".into(), visual(8e-3)),
+        ("REVIEW SF 1, 200 m".into(), review(1.0, 200.0)),
+        ("REVIEW SF 2, 1 km".into(), review(2.0, 1000.0)),
+    ];
+    let renderer = Renderer::new().ok();
+    let views: Vec<View> = path.iter().map(|&(at, look)| View::new(at, look, fov_y, WIDTH, HEIGHT)).collect();
+    // Full detail from every step's camera, drawn once for all methods.
+    let full: Vec<Image> = match &renderer {
+        Some(r) => {
+            views.iter().map(|v| r.render_full(&db, v, ColorMode::Shaded)).collect::<hdov::Result<_>>().map_err(err)?
+        }
+        None => Vec::new(),
+    };
+    let mut steps_csv = Csv::new(&[
+        "method",
+        "step",
+        "flipped",
+        "micros",
+        "pages_read",
+        "loaded_bytes",
+        "faces",
+        "frame_cost_ms",
+        "psnr_db",
+    ]);
+    let mut summary = Csv::new(&[
+        "method",
+        "steps",
+        "step_micros_mean",
+        "pages_read",
+        "loaded_mb",
+        "faces_mean",
+        "faces_variance",
+        "frame_cost_ms_mean",
+        "frame_cost_ms_variance",
+        "frame_cost_ms_max",
+        "psnr_db_mean_finite",
+        "frames_equal_to_full",
+    ]);
+    let bar = ctx.bar("walkthrough", methods.len());
+    let (mut faces_series, mut cost_series) = (Vec::new(), Vec::new());
+    for (name, params) in &methods {
+        // Once untimed (the OS file cache warm), then timed in a fresh session.
+        let mut session = db.session(params).map_err(err)?;
+        for &(at, look) in &path {
+            session.step(at, Some(look)).map_err(err)?;
+        }
+        let mut session = db.session(params).map_err(err)?;
+        let (mut costs, mut faces, mut psnrs, mut micros) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut pages, mut loaded) = (0u64, 0u64);
+        for (i, &(at, look)) in path.iter().enumerate() {
+            let s = session.step(at, Some(look)).map_err(err)?;
+            let cost = s.micros as f64 / 1e3
+                + s.loaded_bytes as f64 / (DISK_MB_PER_S * 1e6) * 1e3
+                + s.faces as f64 / FACES_PER_S * 1e3;
+            let psnr = match &renderer {
+                Some(r) => Some(fidelity::compare(&session.draw(r, &views[i]).map_err(err)?, &full[i]).psnr),
+                None => None,
+            };
+            steps_csv.push(&[
+                name,
+                &i,
+                &s.flipped,
+                &s.micros,
+                &s.pages_read,
+                &s.loaded_bytes,
+                &s.faces,
+                &format!("{cost:.4}"),
+                &psnr.map_or(String::new(), |p| format!("{p:.2}")),
+            ]);
+            costs.push(cost);
+            faces.push(s.faces as f64);
+            micros.push(s.micros as f64);
+            psnrs.extend(psnr);
+            pages += s.pages_read;
+            loaded += s.loaded_bytes;
+        }
+        let finite: Vec<f64> = psnrs.iter().copied().filter(|p| p.is_finite()).collect();
+        summary.push(&[
+            name,
+            &path.len(),
+            &format!("{:.1}", mean(&micros)),
+            &pages,
+            &format!("{:.2}", loaded as f64 / 1e6),
+            &format!("{:.0}", mean(&faces)),
+            &format!("{:.4e}", variance(&faces)),
+            &format!("{:.4}", mean(&costs)),
+            &format!("{:.4e}", variance(&costs)),
+            &format!("{:.3}", costs.iter().copied().fold(0.0, f64::max)),
+            &if finite.is_empty() { String::new() } else { format!("{:.2}", mean(&finite)) },
+            &(psnrs.len() - finite.len()),
+        ]);
+        let per_step = |v: &[f64], scale: f64| v.iter().enumerate().map(|(i, x)| (i as f64, x * scale)).collect();
+        faces_series.push(Series::new(name.clone(), per_step(&faces, 1e-3)));
+        cost_series.push(Series::new(name.clone(), per_step(&costs, 1.0)));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    ctx.write_csv("walkthrough_steps", &steps_csv)?;
+    ctx.write_csv("walkthrough", &summary)?;
+    let mut faces = Panel::new("Faces drawn per step", "step", "thousand faces");
+    faces.series = faces_series;
+    let mut cost = Panel::new("Frame-cost proxy per step (query + load + faces)", "step", "ms").log_y();
+    cost.series = cost_series;
+    ctx.write_chart(
+        "walkthrough",
+        &format!("Walkthrough along the avenue, {} steps (thesis figs. 5.24–5.27)", path.len()),
+        &[faces, cost],
+        1,
+    )
+}
