@@ -18,19 +18,12 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hdov::city::WalkKind;
-use hdov::query::{Camera, LodRule, Method, Mode};
+use hdov::query::LodRule;
 use hdov::render::fidelity;
 use hdov::render::{ColorMode, Image, Renderer, View};
-use hdov::review::ReviewParams;
-use hdov::{Database, QueryParams, SessionParams, Step};
-use hdov_storage::PolicyKind;
-
-/// REVIEW's field of view, both ways (the thesis's 45°); the image's horizontal field of view
-/// is the same, so that no method culled what the image shows.
-const FOV_H_DEG: f32 = 45.0;
-/// The rows whose frames make the picture pair (fig. 5.26).
-const VISUAL_PICTURED: &str = "VISUAL η = 1e-3";
-const REVIEW_PICTURED: &str = "REVIEW SF 1, eyesight 200 m";
+use hdov::{Database, SessionParams, Step};
+use hdov_tools::experiments::walkthrough::{self, FOV_H_DEG, REVIEW_PICTURED, VISUAL_PICTURED};
+use hdov_tools::experiments::{mean, sequence_psnr, variance};
 
 struct Options {
     db: PathBuf,
@@ -83,45 +76,13 @@ struct Row {
     images: Vec<Image>,
 }
 
-fn methods(camera: Camera) -> Vec<(&'static str, SessionParams)> {
-    let visual = |eta: f64, lod_rule: LodRule| SessionParams {
-        query: QueryParams { eta, lod_rule, camera: Some(camera), ..QueryParams::default() },
-        ..SessionParams::default()
-    };
-    let review = |review_box: f32, eyesight: f32| SessionParams {
-        method: Method::Review(ReviewParams { review_box, eyesight, fov_deg: FOV_H_DEG, ..ReviewParams::default() }),
-        query: QueryParams { camera: Some(camera), ..QueryParams::default() },
-        cache: PolicyKind::Dplru,
-        ..SessionParams::default()
-    };
-    let screen = LodRule::default();
-    vec![
-        (
-            "frustum culling",
-            SessionParams {
-                query: QueryParams { mode: Mode::Frustum, camera: Some(camera), ..QueryParams::default() },
-                ..SessionParams::default()
-            },
-        ),
-        ("VISUAL η = 0, LOD 0 (visibility alone)", visual(0.0, LodRule::ScreenError { pixels: 0.0 })),
-        ("VISUAL η = 0", visual(0.0, screen)),
-        (VISUAL_PICTURED, visual(1e-3, screen)),
-        ("VISUAL η = 8e-3", visual(8e-3, screen)),
-        ("VISUAL η = 1e-3, 0.5 px", visual(1e-3, LodRule::ScreenError { pixels: 0.5 })),
-        ("VISUAL η = 1e-3, eq. 5.6 levels (thesis)", visual(1e-3, LodRule::Dov)),
-        (REVIEW_PICTURED, review(1.0, 200.0)),
-        ("REVIEW SF 2, eyesight 1 km", review(2.0, 1000.0)),
-    ]
-}
-
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let o = options()?;
     let [w, h] = o.size;
     let db = Database::open(&o.db)?;
     let grid = *db.grid().ok_or("the database holds no viewing grid")?;
-    let aspect = w as f32 / h as f32;
-    let fov_y = (2.0 * ((FOV_H_DEG.to_radians() / 2.0).tan() / aspect).atan()).to_degrees();
-    let camera = Camera { look: Vec3::X, fov_y_deg: fov_y, aspect, image_height: h };
+    let camera = walkthrough::camera(w, h);
+    let fov_y = camera.fov_y_deg;
     let renderer = match Renderer::new() {
         Ok(r) => Some(r),
         Err(e) => {
@@ -145,7 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None => Vec::new(),
         };
         let mut rows = Vec::new();
-        for (name, params) in methods(camera) {
+        for (name, params) in walkthrough::methods(camera) {
             rows.push(walk_one(&db, name, &params, &path, &views, &full, renderer.as_ref(), o.pictures.is_some())?);
         }
         println!("### The {} walk: {} steps\n", kind.name(), o.steps);
@@ -222,7 +183,7 @@ fn print_table(rows: &[Row]) {
             "–".into()
         } else {
             let min = r.psnr.iter().copied().fold(f64::INFINITY, f64::min);
-            format!("{} ({})", db_text(mean_psnr(&r.psnr)), db_text(min))
+            format!("{} ({})", db_text(sequence_psnr(&r.psnr)), db_text(min))
         };
         let good = if r.psnr.is_empty() {
             "–".into()
@@ -271,22 +232,6 @@ fn picture_pair(rows: &[Row], full: &[Image], file: &std::path::Path) -> hdov::R
     Ok(Some(step))
 }
 
-/// PSNR of the mean squared error over frames (the mean of per-frame MSEs), ∞ if all equal.
-fn mean_psnr(psnr: &[f64]) -> f64 {
-    let mse = mean(&psnr.iter().map(|p| 255f64.powi(2) / 10f64.powf(p / 10.0)).collect::<Vec<_>>());
-    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255f64.powi(2) / mse).log10() }
-}
-
 fn db_text(p: f64) -> String {
     if p.is_finite() { format!("{p:.1}") } else { "∞".into() }
-}
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len().max(1) as f64
-}
-
-/// Population variance.
-fn variance(v: &[f64]) -> f64 {
-    let m = mean(v);
-    v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64
 }

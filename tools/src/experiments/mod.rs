@@ -306,3 +306,15 @@ pub fn quantile(v: &[f64], q: f64) -> f64 {
     }
     s[((q * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1]
 }
+
+/// The PSNR of a sequence of frames: of the mean of their squared errors (frames equal to the
+/// reference, PSNR ∞, add zero error), ∞ when every frame is equal (decision 31).
+pub fn sequence_psnr(psnr: &[f64]) -> f64 {
+    let mse = mean(
+        &psnr
+            .iter()
+            .map(|&p| if p.is_finite() { 255f64.powi(2) / 10f64.powf(p / 10.0) } else { 0.0 })
+            .collect::<Vec<_>>(),
+    );
+    if mse > 0.0 { 10.0 * (255f64.powi(2) / mse).log10() } else { f64::INFINITY }
+}

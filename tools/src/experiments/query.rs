@@ -5,13 +5,13 @@
 //! rule and polygon budgets, on one chart.
 
 use glam::Vec3;
-use hdov::query::Camera;
+use hdov::query::{Camera, LodRule};
 use hdov::render::{ColorMode, Renderer, View, fidelity};
 use hdov::{Answer, Database, Mode, QueryParams};
 use hdov_storage::LayoutKind;
 
 use super::charts::{Panel, Series};
-use super::{Csv, Ctx, Result, err, mean};
+use super::{Csv, Ctx, Result, err, mean, sequence_psnr};
 
 /// η of the sweeps: 0 (the naive answer) to 8e-3, as the thesis's figs. 5.21–5.22.
 pub const ETAS: [f64; 10] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 2e-3, 4e-3, 6e-3, 8e-3];
@@ -156,7 +156,12 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     };
     let mut configs: Vec<(&str, f64, QueryParams)> = Vec::new();
     for eta in ETAS {
-        configs.push(("η rule", eta, QueryParams { eta, ..Default::default() }));
+        configs.push(("η, screen 1 px (default)", eta, QueryParams { eta, ..Default::default() }));
+        configs.push(("η, eq. 5.6 (thesis)", eta, QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() }));
+    }
+    for pixels in [0.25, 0.5, 2.0, 4.0, 8.0, 16.0, 64.0] {
+        let lod_rule = LodRule::ScreenError { pixels };
+        configs.push(("screen px at η = 1e-3", pixels, QueryParams { eta: 1e-3, lod_rule, ..Default::default() }));
     }
     for tau in [0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 64.0] {
         configs.push(("vmsse", tau, QueryParams { mode: Mode::Vmsse, tau, ..Default::default() }));
@@ -180,7 +185,7 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     let bar = ctx.bar("accuracy", configs.len());
     let mut points: Vec<(&str, [f64; 4])> = Vec::new();
     for (rule, param, base) in &configs {
-        let (mut faces, mut pages, mut micros, mut mse, mut cov, mut sil) =
+        let (mut faces, mut pages, mut micros, mut psnrs, mut cov, mut sil) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for (v, reference) in views.iter().zip(&full) {
             let p = QueryParams { camera: Some(camera(v)), ..*base };
@@ -190,12 +195,11 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
             faces.push(a.stats.faces as f64);
             pages.push(a.stats.pages_read as f64);
             micros.push(a.stats.micros as f64);
-            mse.push(mse_of_psnr(f.psnr));
+            psnrs.push(f.psnr);
             cov.push(f.coverage_diff);
             sil.push(f.silhouette_diff);
         }
-        // PSNR of the mean squared error over the views (equal images add 0; no ∞ to average).
-        let psnr = psnr_of_mse(mean(&mse));
+        let psnr = sequence_psnr(&psnrs);
         let row = [mean(&faces), mean(&pages), mean(&micros), psnr];
         csv.push(&[
             rule,
@@ -213,7 +217,8 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     }
     bar.finish_and_clear();
     ctx.write_csv("accuracy", &csv)?;
-    let rules = ["η rule", "vmsse", "budget", "frustum"];
+    let rules =
+        ["η, screen 1 px (default)", "η, eq. 5.6 (thesis)", "screen px at η = 1e-3", "vmsse", "budget", "frustum"];
     let panel = |title: &str, y: &str, i: usize, scale: f64| {
         let mut p = Panel::new(title, "PSNR against full detail (dB)", y).log_y();
         for rule in rules {
@@ -240,11 +245,3 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
 
 /// Where equal images are drawn on the chart (their PSNR is ∞).
 const PSNR_CAP: f64 = 80.0;
-
-fn mse_of_psnr(psnr: f64) -> f64 {
-    if psnr.is_finite() { 255f64.powi(2) / 10f64.powf(psnr / 10.0) } else { 0.0 }
-}
-
-fn psnr_of_mse(mse: f64) -> f64 {
-    if mse > 0.0 { 10.0 * (255f64.powi(2) / mse).log10() } else { f64::INFINITY }
-}
