@@ -151,7 +151,8 @@ fn exact_scene() -> (Scene, Vec3) {
     let permutations = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
     while b.scene.objects.len() < 150 {
         let i = b.scene.objects.len();
-        let c = Vec3::new(rng.range(-20.0, 20.0), rng.range(-2.0, 8.0), rng.range(-20.0, 20.0)).map(|x| (x * 8.0).round() / 8.0);
+        let c = Vec3::new(rng.range(-20.0, 20.0), rng.range(-2.0, 8.0), rng.range(-20.0, 20.0))
+            .map(|x| (x * 8.0).round() / 8.0);
         if c.length() < 5.0 || (c - inside).length() < 10.0 || (c - Vec3::new(-6.0, 0.0, 6.0)).length() < 5.0 {
             continue;
         }
@@ -178,7 +179,8 @@ fn baked_lods(scene: &Scene, lods: &[Vec<LodLevel>]) -> Vec<Vec<LodLevel>> {
         .iter()
         .map(|o| {
             let m = o.transform;
-            let scale = m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
+            let scale =
+                m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
             lods[o.mesh as usize]
                 .iter()
                 .map(|l| {
@@ -229,12 +231,8 @@ fn gpu_instances_draw_like_baked_world_meshes_texel_for_texel() {
     let mut full_detail_triangles = 0;
     for with_lods in [false, true] {
         let (lods, flat_lods) = if with_lods { (Some(&lods[..]), Some(&flat_lods[..])) } else { (None, None) };
-        let options = |lods, direct_draws| GpuOptions {
-            near: Some(near),
-            lods,
-            lod_tolerance_texels: tolerance,
-            direct_draws,
-        };
+        let options =
+            |lods, direct_draws| GpuOptions { near: Some(near), lods, lod_tolerance_texels: tolerance, direct_draws };
         let mut world = GpuBackend::with_options(&flat, r, &options(flat_lods, true)).unwrap();
         let mut indirect = GpuBackend::with_options(&scene, r, &options(lods, false)).unwrap();
         let mut direct = GpuBackend::with_options(&scene, r, &options(lods, true)).unwrap();
@@ -302,8 +300,11 @@ fn gpu_instances_with_arbitrary_rotations_draw_like_baked_world_meshes() {
     for p in [Vec3::ZERO, Vec3::new(-3.0, 5.0, 2.5), inside] {
         let (a, b) = (render(&mut instanced, p), render(&mut world, p));
         let differ = differing(&a, &b);
-        let back =
-            a.ids.iter().filter(|&&id| id != NO_OBJECT && id & BACK_FACE_BIT != 0 && id & !BACK_FACE_BIT != FLATTENED).count();
+        let back = a
+            .ids
+            .iter()
+            .filter(|&&id| id != NO_OBJECT && id & BACK_FACE_BIT != 0 && id & !BACK_FACE_BIT != FLATTENED)
+            .count();
         println!("viewpoint {p}: {} of {} texels differ, {back} back-face texels", differ.len(), a.ids.len());
         assert!(differ.len() <= 12, "{p}: {} texels differ", differ.len());
         if p != inside {
