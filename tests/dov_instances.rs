@@ -8,7 +8,7 @@ use dov_common::*;
 use glam::{Mat4, Quat, Vec3, Vec4};
 use hdov::dov::gpu::GpuOptions;
 use hdov::dov::{BACK_FACE_BIT, CpuBackend, DovBackend, GpuBackend, IdCube, NO_OBJECT};
-use hdov::lod::{LodLevel, LodParams, leaf_chain, transformed};
+use hdov::lod::{LodLevel, LodParams, leaf_chain, max_axis_scale, transformed};
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 
 /// Instances of one icosphere and one cube around the origin under varied transforms: plain
@@ -179,8 +179,7 @@ fn baked_lods(scene: &Scene, lods: &[Vec<LodLevel>]) -> Vec<Vec<LodLevel>> {
         .iter()
         .map(|o| {
             let m = o.transform;
-            let scale =
-                m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
+            let scale = max_axis_scale(&m);
             lods[o.mesh as usize]
                 .iter()
                 .map(|l| {
