@@ -132,12 +132,6 @@ pub fn coarsest_below(errors: impl DoubleEndedIterator<Item = f32> + ExactSizeIt
     errors.rev().position(|e| e < budget).map_or(0, |from_end| last - from_end)
 }
 
-/// The largest axis scale of an affine transform: a model-space error times it bounds the
-/// world-space error of an instance.
-pub fn max_axis_scale(m: &glam::Mat4) -> f32 {
-    m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length())
-}
-
 /// The coarsest internal LOD of a child node, built in an earlier (lower) level pass.
 fn coarsest_internal(internal: &[Vec<LodLevel>], child: usize) -> &LodLevel {
     internal[child].last().expect("children are simplified before their parent")

@@ -8,7 +8,8 @@ use dov_common::*;
 use glam::{Mat4, Quat, Vec3, Vec4};
 use hdov::dov::gpu::GpuOptions;
 use hdov::dov::{BACK_FACE_BIT, CpuBackend, DovBackend, GpuBackend, IdCube, NO_OBJECT};
-use hdov::lod::{LodLevel, LodParams, leaf_chain, max_axis_scale, transformed};
+use hdov::geom::max_scale;
+use hdov::lod::{LodLevel, LodParams, leaf_chain, transformed};
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 
 /// Instances of one icosphere and one cube around the origin under varied transforms: plain
@@ -179,7 +180,7 @@ fn baked_lods(scene: &Scene, lods: &[Vec<LodLevel>]) -> Vec<Vec<LodLevel>> {
         .iter()
         .map(|o| {
             let m = o.transform;
-            let scale = max_axis_scale(&m);
+            let scale = max_scale(&m);
             lods[o.mesh as usize]
                 .iter()
                 .map(|l| {

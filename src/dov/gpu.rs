@@ -36,9 +36,9 @@ use super::cpu::{check_cube, check_point, check_resolution_and_near};
 use super::cubemap::{FACE_COUNT, face_basis};
 use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, MAX_OBJECT_ID};
 use crate::error::{Error, Result};
-use crate::geom::Aabb;
+use crate::geom::{Aabb, max_scale};
 use crate::gfx::Gpu;
-use crate::lod::{LodLevel, coarsest_below, max_axis_scale};
+use crate::lod::{LodLevel, coarsest_below};
 use crate::scene::{Mesh, Scene};
 
 /// Bytes between the six per-face uniform blocks (the largest `min_uniform_buffer_offset_alignment`
@@ -496,7 +496,7 @@ fn draw_objects(scene: &Scene, lods: Option<&[Vec<LodLevel>]>, origin: Vec3) -> 
             let m = object.transform;
             let bounds =
                 used[object.mesh as usize].iter().fold(Aabb::EMPTY, |b, &p| b.grow(m.transform_point3(p) - origin));
-            let scale = max_axis_scale(&m);
+            let scale = max_scale(&m);
             DrawObject { mesh: object.mesh, scale, bounds }
         })
         .collect()
