@@ -124,6 +124,14 @@ pub fn pick_level(levels: usize, faces: impl Fn(usize) -> u64, k: f64) -> usize 
         .unwrap_or(0)
 }
 
+/// The error-budget rule that picks a level for drawing from one viewpoint: the coarsest level
+/// whose error (`errors`, finest first, in the units of `budget`) is below `budget`; level 0
+/// (full detail) when none is. O(levels).
+pub fn coarsest_below(errors: impl DoubleEndedIterator<Item = f32> + ExactSizeIterator, budget: f32) -> usize {
+    let last = errors.len().saturating_sub(1);
+    errors.rev().position(|e| e < budget).map_or(0, |from_end| last - from_end)
+}
+
 /// The coarsest internal LOD of a child node, built in an earlier (lower) level pass.
 fn coarsest_internal(internal: &[Vec<LodLevel>], child: usize) -> &LodLevel {
     internal[child].last().expect("children are simplified before their parent")
@@ -233,6 +241,19 @@ mod tests {
             }
         }
         m
+    }
+
+    #[test]
+    fn coarsest_below_takes_the_coarsest_level_under_the_budget() {
+        let errors = [0.0, 0.1, 0.4, 2.0];
+        let pick = |budget| coarsest_below(errors.iter().copied(), budget);
+        assert_eq!(pick(0.0), 0, "no level is below a zero budget: full detail");
+        assert_eq!(pick(0.05), 0);
+        assert_eq!(pick(0.1), 0, "the budget is exclusive");
+        assert_eq!(pick(0.2), 1);
+        assert_eq!(pick(1.0), 2);
+        assert_eq!(pick(f32::INFINITY), 3);
+        assert_eq!(coarsest_below(std::iter::empty(), 1.0), 0);
     }
 
     #[test]

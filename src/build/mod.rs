@@ -226,7 +226,7 @@ fn build_visibility(
     progress: &Progress,
 ) -> Result<VisibilityInfo> {
     let t = Instant::now();
-    let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, near: None };
+    let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, ..Default::default() };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };

@@ -1,33 +1,45 @@
 //! The GPU backend: wgpu rasterisation of the id cube map.
 //!
-//! All geometry is uploaded once, in world space relative to the scene's centre (f32 precision
-//! stays near the geometry), one vertex = position + object id. Objects lie in the vertex buffer in
-//! *descending* id order, so that (a) the objects that survive a face's frustum test form a few
-//! contiguous vertex ranges, one draw each, and (b) with a `GreaterEqual` reverse-Z depth test,
-//! the later-drawn lower id wins an exact depth tie — the CPU backend's tie rule.
+//! **Instanced drawing.** Each base mesh is uploaded once, in model space (positions + a u32
+//! index buffer), followed by its coarser leaf LODs when [`GpuOptions::lods`] is given; an
+//! instance buffer holds per object its transform (rows of `T(−origin)·M`, so positions come out
+//! relative to the scene's centre and f32 precision stays near the geometry) and its id, with
+//! [`super::BACK_FACE_BIT`] set for a mirroring transform (negative determinant: its triangles
+//! wind the other way on screen, so the fragment shader flips the front-facing test). GPU memory
+//! is thus the base meshes once plus 52 bytes per object, instead of every instance's
+//! triangles in world space (docs/dov.md, "GPU memory").
+//!
+//! **Draw order is descending id**, as the CPU backend's tie rule needs: with a `GreaterEqual`
+//! reverse-Z depth test the later-drawn lower id wins an exact depth tie. Instances lie in the
+//! instance buffer in descending id order; per face, the objects that survive the frustum test
+//! become draw commands in that order, consecutive objects with the same base mesh and level
+//! merged into one instanced draw. Where the device has indirect draws with a first instance
+//! ([`crate::gfx::Gpu::indirect_draws`]) the commands go out as one `multi_draw_indexed_indirect`
+//! per face, otherwise as direct `draw_indexed` calls (same commands, same pixels).
 //!
 //! Each face is rendered into its own R32Uint 2D texture (copying 2D-array layers to a buffer
 //! reads back zeros on the GL backend), then all six are copied into one mapped buffer and
 //! weighed on the CPU with [`super::IdCube::dov`], exactly as the CPU backend's ids are.
 //!
-//! **LOD-aware drawing** ([`GpuBackend::with_options`] with [`GpuOptions::lods`]): every coarser
-//! leaf LOD of every object is uploaded too, in world space right after the object's full-detail
-//! triangles, and per sample point each object is drawn at the coarsest level whose world-space
-//! error, seen from the point at the distance of the object's box, subtends less than
-//! [`GpuOptions::lod_tolerance_texels`] texels at the face centre (a texel there spans 2/R
-//! radians). An object whose box contains the point is drawn at full detail. docs/dov.md
-//! ("LOD-aware drawing") has the measured DoV change and speed-up.
+//! **LOD-aware drawing** ([`GpuBackend::with_options`] with [`GpuOptions::lods`]): per sample
+//! point each object is drawn at the coarsest level whose world-space error (the level's error
+//! times the transform's largest axis scale), seen from the point at the distance of the
+//! object's box, subtends less than [`GpuOptions::lod_tolerance_texels`] texels at the face
+//! centre (a texel there spans 2/R radians): [`crate::lod::coarsest_below`]. An object whose box
+//! contains the point is drawn at full detail. docs/dov.md ("LOD-aware drawing") has the
+//! measured DoV change and speed-up.
 
 use glam::{Mat4, Vec3, Vec4};
+use wgpu::util::DrawIndexedIndirectArgs;
 
-use super::cpu::{check_cube, check_point, check_resolution_and_near, world_triangles};
+use super::cpu::{check_cube, check_point, check_resolution_and_near};
 use super::cubemap::{FACE_COUNT, face_basis};
-use super::{CubeMap, DovBackend, IdCube};
+use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, MAX_OBJECT_ID};
 use crate::error::{Error, Result};
-use crate::geom::Aabb;
-use crate::gfx::{Gpu, Vertex, push_world};
-use crate::lod::LodLevel;
-use crate::scene::Scene;
+use crate::geom::{Aabb, max_scale};
+use crate::gfx::Gpu;
+use crate::lod::{LodLevel, coarsest_below};
+use crate::scene::{Mesh, Scene};
 
 /// Bytes between the six per-face uniform blocks (the largest `min_uniform_buffer_offset_alignment`
 /// wgpu allows).
@@ -53,11 +65,14 @@ pub struct GpuOptions<'a> {
     /// An object is drawn at a level whose world error / distance to the object's box is below
     /// this many texels at the face centre (each 2/R radians). 0 draws full detail throughout.
     pub lod_tolerance_texels: f32,
+    /// Issue direct `draw_indexed` calls even where the device could take one indirect
+    /// multi-draw per face: the same commands and pixels, for testing and timing the fallback.
+    pub direct_draws: bool,
 }
 
 impl Default for GpuOptions<'_> {
     fn default() -> Self {
-        Self { near: None, lods: None, lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS }
+        Self { near: None, lods: None, lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, direct_draws: false }
     }
 }
 
@@ -70,9 +85,60 @@ struct FaceUniform {
     eye: [f32; 4],
 }
 
-/// Rasterises the id cube around a point with wgpu. Construction uploads all geometry once and
-/// allocates the render targets; each [`DovBackend::render_ids`] does 6 render passes (objects
-/// culled per face by their boxes), one copy and one blocking read-back of 6·R²·4 bytes.
+/// One instance: rows 0–2 of the affine map from model space to positions relative to the
+/// scene's centre, and the object id with [`BACK_FACE_BIT`] set when the transform mirrors.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Instance {
+    rows: [[f32; 4]; 3],
+    id_bits: u32,
+}
+
+impl Instance {
+    /// Shader locations 1–3 (`vec4<f32>` rows) and 4 (`u32` id bits), one step per instance.
+    const ATTRIBUTES: [wgpu::VertexAttribute; 4] =
+        wgpu::vertex_attr_array![1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Uint32];
+
+    /// `T(−origin)·m`, composed in f64 and rounded once to f32 (the transform's last row is
+    /// taken as (0, 0, 0, 1), as `Mat4::transform_point3` takes it).
+    fn new(m: &Mat4, origin: Vec3, id: u32) -> Self {
+        let row = |i: usize| {
+            let t = f64::from(m.w_axis[i]) - f64::from(origin[i]);
+            [m.x_axis[i], m.y_axis[i], m.z_axis[i], t as f32]
+        };
+        let mirrored = if m.determinant() < 0.0 { BACK_FACE_BIT } else { 0 };
+        Self { rows: [row(0), row(1), row(2)], id_bits: id | mirrored }
+    }
+}
+
+/// Model-space position layout (shader location 0), one step per vertex.
+const POSITION_ATTRIBUTES: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+
+/// One level of one base mesh in the shared position and index buffers.
+#[derive(Clone, Copy, Debug)]
+struct MeshLevel {
+    first_index: u32,
+    index_count: u32,
+    base_vertex: i32,
+    /// The simplifier's error in model units (0 for full detail).
+    error: f32,
+}
+
+/// One object, in draw (descending id) order; its instance index is its position in that order.
+#[derive(Clone, Debug)]
+struct DrawObject {
+    mesh: u32,
+    /// The transform's largest axis scale: model errors times it are world errors.
+    scale: f32,
+    /// World bounds relative to `origin` of every level's vertices (culling must keep a coarse
+    /// level that bulges out of the full-detail box).
+    bounds: Aabb,
+}
+
+/// Rasterises the id cube around a point with wgpu. Construction uploads the base meshes (and
+/// their LODs) once in model space plus one instance per object, and allocates the render
+/// targets; each [`DovBackend::render_ids`] does 6 render passes (objects culled per face by
+/// their boxes), one copy and one blocking read-back of 6·R²·4 bytes.
 pub struct GpuBackend {
     cube: CubeMap,
     near: f32,
@@ -80,21 +146,31 @@ pub struct GpuBackend {
     pipeline: wgpu::RenderPipeline,
     uniforms: wgpu::Buffer,
     face_bind_groups: Vec<wgpu::BindGroup>,
-    vertices: Option<wgpu::Buffer>,
-    /// Per object in draw (descending id) order, its levels finest first: the vertex range in
-    /// the vertex buffer and the world-space error (0 for full detail).
-    draw_levels: Vec<Vec<LevelRange>>,
+    /// Model-space positions, indices and instances; `None` for an empty scene.
+    geometry: Option<GeometryBuffers>,
+    /// Per base mesh, its levels finest first (only level 0 without LODs).
+    mesh_levels: Vec<Vec<MeshLevel>>,
+    objects: Vec<DrawObject>,
+    /// One face's draw commands at most per object, six faces: `None` with direct draws.
+    indirect: Option<wgpu::Buffer>,
     /// Largest world error / distance drawn at a coarser level (radians); 0 without LODs.
     lod_max_angle: f32,
     /// Triangles drawn since construction, over all faces and points.
     triangles_drawn: u64,
-    /// Bounds of each object in draw order, relative to `origin`.
-    draw_bounds: Vec<Aabb>,
+    /// Draw commands (instanced draws) issued since construction.
+    draw_commands: u64,
+    bytes_uploaded: u64,
     origin: Vec3,
     face_targets: Vec<(wgpu::Texture, wgpu::TextureView)>,
     depth_view: wgpu::TextureView,
     readback: wgpu::Buffer,
     padded_row_bytes: u32,
+}
+
+struct GeometryBuffers {
+    positions: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    instances: wgpu::Buffer,
 }
 
 impl GpuBackend {
@@ -110,12 +186,11 @@ impl GpuBackend {
         Self::with_options(scene, resolution, &GpuOptions { near: Some(near), ..Default::default() })
     }
 
-    /// As [`GpuBackend::new`] with [`GpuOptions`]: near plane and LOD-aware drawing. With
-    /// `options.lods`, every coarser level of every object is uploaded as well (world space, so
-    /// GPU memory grows by the coarser levels' triangles: at most about as much again as the
-    /// scene for ratio ½, +29 % on the small generated city).
-    /// Fails with [`Error::BadParam`] when `lods` has not one chain per base mesh
-    /// or the tolerance is negative or not finite.
+    /// As [`GpuBackend::new`] with [`GpuOptions`]: near plane, LOD-aware drawing and the draw
+    /// calls. With `options.lods`, every coarser level of every base mesh is uploaded as well
+    /// (model space, once per base mesh).
+    /// Fails with [`Error::BadParam`] when `lods` has not one chain per base mesh, the tolerance
+    /// is negative or not finite, or the scene has more objects than ids can carry.
     pub fn with_options(scene: &Scene, resolution: u32, options: &GpuOptions) -> Result<Self> {
         let near = options.near.unwrap_or_else(|| super::default_near(&scene.bounds()));
         check_resolution_and_near(resolution, near)?;
@@ -131,6 +206,12 @@ impl GpuBackend {
                 format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
             ));
         }
+        if scene.objects.len() > MAX_OBJECT_ID as usize {
+            return Err(Error::bad_param(
+                "scene",
+                format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
+            ));
+        }
         let gpu = Gpu::open("hdov dov")?;
         let limit = gpu.limits.max_texture_dimension_2d;
         if resolution > limit {
@@ -144,8 +225,34 @@ impl GpuBackend {
         let out_of_memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let origin = scene.bounds().center();
         let origin = if origin.is_finite() { origin } else { Vec3::ZERO };
-        let geometry = Geometry::build(scene, origin, options.lods)?;
-        let vertices = gpu.upload_vertices("dov vertices", &geometry.vertices)?;
+        let model = ModelGeometry::build(scene, options.lods)?;
+        let objects = draw_objects(scene, options.lods, origin);
+        let instances: Vec<Instance> = (0..scene.objects.len())
+            .rev()
+            .map(|o| Instance::new(&scene.objects[o].transform, origin, o as u32))
+            .collect();
+        let bytes_uploaded = std::mem::size_of_val(&model.positions[..])
+            + std::mem::size_of_val(&model.indices[..])
+            + std::mem::size_of_val(&instances[..]);
+        let geometry = match (
+            gpu.upload("dov model positions", bytemuck::cast_slice(&model.positions), wgpu::BufferUsages::VERTEX)?,
+            gpu.upload("dov model indices", bytemuck::cast_slice(&model.indices), wgpu::BufferUsages::INDEX)?,
+            gpu.upload("dov instances", bytemuck::cast_slice(&instances), wgpu::BufferUsages::VERTEX)?,
+        ) {
+            (Some(positions), Some(indices), Some(instances)) => {
+                Some(GeometryBuffers { positions, indices, instances })
+            }
+            _ => None,
+        };
+        drop(instances);
+        let indirect = (gpu.indirect_draws && !options.direct_draws && geometry.is_some()).then(|| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("dov draw commands"),
+                size: (FACE_COUNT * objects.len() * std::mem::size_of::<DrawIndexedIndirectArgs>()) as u64,
+                usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
 
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("dov face uniforms"),
@@ -175,16 +282,7 @@ impl GpuBackend {
         let extent = wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 };
         let face_targets = (0..FACE_COUNT)
             .map(|_| {
-                let texture = device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("dov id face"),
-                    size: extent,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::R32Uint,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                });
+                let texture = gpu.target("dov id face", resolution, resolution, wgpu::TextureFormat::R32Uint);
                 let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
                 (texture, view)
             })
@@ -215,11 +313,14 @@ impl GpuBackend {
             pipeline,
             uniforms,
             face_bind_groups,
-            vertices,
-            draw_levels: geometry.draw_levels,
+            geometry,
+            mesh_levels: model.levels,
+            objects,
+            indirect,
             lod_max_angle: if options.lods.is_some() { tolerance * 2.0 / resolution as f32 } else { 0.0 },
             triangles_drawn: 0,
-            draw_bounds: geometry.draw_bounds,
+            draw_commands: 0,
+            bytes_uploaded: bytes_uploaded as u64,
             origin,
             face_targets,
             depth_view,
@@ -242,47 +343,61 @@ impl GpuBackend {
         self.triangles_drawn
     }
 
+    /// Draw commands (one instanced draw of one mesh level each) issued since construction.
+    pub fn draw_commands(&self) -> u64 {
+        self.draw_commands
+    }
+
+    /// Bytes of geometry uploaded at construction: model-space positions (12 per vertex) and
+    /// indices (4 per corner) of every base mesh level, and 52 per instance. Per rendering only
+    /// the face uniforms and draw commands are written (not counted here).
+    pub fn bytes_uploaded(&self) -> u64 {
+        self.bytes_uploaded
+    }
+
+    /// Whether the draw commands go out as one indirect multi-draw per face (else direct draws).
+    pub fn indirect_draws(&self) -> bool {
+        self.indirect.is_some()
+    }
+
     /// Whether LOD-aware drawing is on (LODs given and a tolerance above 0).
     pub fn lod_drawing(&self) -> bool {
         self.lod_max_angle > 0.0
     }
 
-    /// Per object in draw order, the vertex range of the level to draw from `eye`: the coarsest
-    /// whose world error / distance to the object's box is below the tolerance angle; full
-    /// detail when the box contains the eye.
-    fn chosen_ranges(&self, eye: Vec3) -> Vec<std::ops::Range<u32>> {
-        self.draw_levels
+    /// Per object in draw order, the level to draw from `eye` ([`coarsest_below`] of its world
+    /// errors against the tolerance angle times the distance to its box); full detail when the
+    /// box contains the eye.
+    fn chosen_levels(&self, eye: Vec3) -> Vec<u32> {
+        self.objects
             .iter()
-            .zip(&self.draw_bounds)
-            .map(|(levels, bounds)| {
+            .map(|o| {
+                let levels = &self.mesh_levels[o.mesh as usize];
                 if levels.len() == 1 || self.lod_max_angle <= 0.0 {
-                    return levels[0].vertices.clone();
+                    return 0;
                 }
                 // Distance from the eye to the box (0 inside it, so full detail there).
-                let distance = (bounds.min - eye).max(eye - bounds.max).max(Vec3::ZERO).length();
-                let budget = self.lod_max_angle * distance;
-                levels
-                    .iter()
-                    .rev()
-                    .find(|l| l.error < budget)
-                    .map_or_else(|| levels[0].vertices.clone(), |l| l.vertices.clone())
+                let distance = (o.bounds.min - eye).max(eye - o.bounds.max).max(Vec3::ZERO).length();
+                coarsest_below(levels.iter().map(|l| l.error * o.scale), self.lod_max_angle * distance) as u32
             })
             .collect()
     }
 
-    /// Vertex ranges to draw for one face: objects whose box may reach into the face's frustum,
-    /// at the levels in `chosen` (one range per object in draw order), consecutive ones merged.
-    /// Conservative: a box is dropped only when it lies wholly outside one of the frustum's
-    /// planes (or wholly nearer than the near plane).
-    fn visible_ranges(&self, face: usize, eye: Vec3, chosen: &[std::ops::Range<u32>]) -> Vec<std::ops::Range<u32>> {
+    /// Draw commands for one face: objects whose box may reach into the face's frustum, at the
+    /// levels in `chosen` (one per object in draw order), in draw order, consecutive instances of
+    /// the same mesh level merged into one command. Conservative: a box is dropped only when it
+    /// lies wholly outside one of the frustum's planes (or wholly nearer than the near plane).
+    fn face_commands(&self, face: usize, eye: Vec3, chosen: &[u32], out: &mut Vec<DrawIndexedIndirectArgs>) {
         let b = face_basis(face);
         // Inside the frustum: n·d ≥ 0 for each side normal, forward·d ≥ near.
         let sides = [b.forward - b.right, b.forward + b.right, b.forward - b.up, b.forward + b.up];
-        let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
-        for (range, bounds) in chosen.iter().zip(&self.draw_bounds) {
-            if range.is_empty() {
+        let first = out.len();
+        for (instance, (object, &level)) in self.objects.iter().zip(chosen).enumerate() {
+            let level = self.mesh_levels[object.mesh as usize][level as usize];
+            if level.index_count == 0 {
                 continue;
             }
+            let bounds = &object.bounds;
             let centre = bounds.center() - eye;
             let half = bounds.extent() * 0.5;
             // The box's largest value of n·d; slack covers rounding at the planes.
@@ -292,83 +407,129 @@ impl GpuBackend {
             if outside {
                 continue;
             }
-            match ranges.last_mut() {
-                Some(last) if last.end == range.start => last.end = range.end,
-                _ => ranges.push(range.clone()),
+            let instance = instance as u32;
+            // Only this face's commands may be extended.
+            let face_has_commands = out.len() > first;
+            match out.last_mut() {
+                Some(last)
+                    if face_has_commands
+                        && last.first_index == level.first_index
+                        && last.base_vertex == level.base_vertex
+                        && last.first_instance + last.instance_count == instance =>
+                {
+                    last.instance_count += 1
+                }
+                _ => out.push(DrawIndexedIndirectArgs {
+                    index_count: level.index_count,
+                    instance_count: 1,
+                    first_index: level.first_index,
+                    base_vertex: level.base_vertex,
+                    first_instance: instance,
+                }),
             }
         }
-        ranges
     }
 }
 
-/// One level of one object in the vertex buffer.
-#[derive(Clone, Debug)]
-struct LevelRange {
-    vertices: std::ops::Range<u32>,
-    /// The simplifier's error scaled to world units by the transform's largest axis scale.
-    error: f32,
+/// Every base mesh's levels, model space, in one position and one index buffer.
+struct ModelGeometry {
+    positions: Vec<[f32; 3]>,
+    indices: Vec<u32>,
+    levels: Vec<Vec<MeshLevel>>,
 }
 
-/// The scene as one vertex buffer (three vertices per triangle, no sharing: every object is its
-/// own world-space copy), objects in descending id order, each object's full detail followed by
-/// its coarser LODs (when given).
-struct Geometry {
-    vertices: Vec<Vertex>,
-    draw_levels: Vec<Vec<LevelRange>>,
-    draw_bounds: Vec<Aabb>,
-}
-
-impl Geometry {
-    fn build(scene: &Scene, origin: Vec3, lods: Option<&[Vec<LodLevel>]>) -> Result<Self> {
-        let (triangles, objects) = world_triangles(scene)?;
-        // Triangles are grouped by object in ascending order; walk the groups backwards.
-        let mut starts = vec![0usize; scene.objects.len() + 1];
-        for &o in &objects {
-            starts[o as usize + 1] += 1;
-        }
-        for i in 1..starts.len() {
-            starts[i] += starts[i - 1];
-        }
-        let extra: usize = lods.map_or(0, |lods| {
-            scene.objects.iter().map(|o| lods[o.mesh as usize].iter().skip(1).map(|l| l.faces()).sum::<usize>()).sum()
-        });
-        let mut vertices = Vec::with_capacity((triangles.len() + extra) * 3);
-        let mut draw_levels = Vec::with_capacity(scene.objects.len());
-        let mut draw_bounds = Vec::with_capacity(scene.objects.len());
-        for object in (0..scene.objects.len()).rev() {
-            let first = vertices.len() as u32;
-            let mut bounds = Aabb::EMPTY;
-            for t in &triangles[starts[object]..starts[object + 1]] {
-                for p in t {
-                    let rel = *p - origin;
-                    bounds = bounds.grow(rel);
-                    vertices.push(Vertex { position: rel.to_array(), id: object as u32 });
-                }
+impl ModelGeometry {
+    fn build(scene: &Scene, lods: Option<&[Vec<LodLevel>]>) -> Result<Self> {
+        let mut out =
+            Self { positions: Vec::new(), indices: Vec::new(), levels: Vec::with_capacity(scene.meshes.len()) };
+        for (m, base) in scene.meshes.iter().enumerate() {
+            let mut levels = vec![out.push(&base.mesh, 0.0)?];
+            for level in lods.map_or(&[][..], |lods| lods[m].get(1..).unwrap_or(&[])) {
+                levels.push(out.push(&level.mesh, level.error)?);
             }
-            let mut levels = vec![LevelRange { vertices: first..vertices.len() as u32, error: 0.0 }];
-            if let Some(lods) = lods {
-                let o = &scene.objects[object];
-                let m = o.transform;
-                let scale =
-                    m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
-                for level in lods[o.mesh as usize].iter().skip(1) {
-                    let first = vertices.len() as u32;
-                    push_world(&mut vertices, &level.mesh, &m, origin, object as u32);
-                    // Culling must keep a coarse level that bulges out of the full-detail box.
-                    for v in &vertices[first as usize..] {
-                        bounds = bounds.grow(Vec3::from(v.position));
-                    }
-                    levels.push(LevelRange { vertices: first..vertices.len() as u32, error: level.error * scale });
-                }
-            }
-            draw_levels.push(levels);
-            draw_bounds.push(bounds);
-            if vertices.len() > u32::MAX as usize {
-                return Err(Error::Gpu(format!("{} vertices exceed u32 vertex indices", vertices.len())));
-            }
+            out.levels.push(levels);
         }
-        Ok(Self { vertices, draw_levels, draw_bounds })
+        Ok(out)
     }
+
+    fn push(&mut self, mesh: &Mesh, error: f32) -> Result<MeshLevel> {
+        let (base_vertex, first_index) = (self.positions.len(), self.indices.len());
+        if base_vertex + mesh.positions.len() > i32::MAX as usize
+            || first_index + mesh.indices.len() > u32::MAX as usize
+        {
+            return Err(Error::Gpu(format!(
+                "{} vertices and {} indices exceed the GPU's index range",
+                base_vertex + mesh.positions.len(),
+                first_index + mesh.indices.len()
+            )));
+        }
+        self.positions.extend_from_slice(&mesh.positions);
+        self.indices.extend_from_slice(&mesh.indices);
+        Ok(MeshLevel {
+            first_index: first_index as u32,
+            index_count: mesh.indices.len() as u32,
+            base_vertex: base_vertex as i32,
+            error,
+        })
+    }
+}
+
+/// The objects in draw (descending id) order with their world boxes relative to `origin`, taken
+/// over the vertices every level's triangles use, each transformed as `Mat4::transform_point3`
+/// and then offset (so the box, which LOD selection measures distance to, does not depend on
+/// how the GPU composes the transform).
+fn draw_objects(scene: &Scene, lods: Option<&[Vec<LodLevel>]>, origin: Vec3) -> Vec<DrawObject> {
+    // Per base mesh, the positions its levels' triangles use, each once.
+    let used: Vec<Vec<Vec3>> = scene
+        .meshes
+        .iter()
+        .enumerate()
+        .map(|(m, base)| {
+            let coarser = lods.map_or(&[][..], |lods| lods[m].get(1..).unwrap_or(&[]));
+            std::iter::once(&base.mesh).chain(coarser.iter().map(|l| &l.mesh)).flat_map(used_positions).collect()
+        })
+        .collect();
+    (0..scene.objects.len())
+        .rev()
+        .map(|o| {
+            let object = &scene.objects[o];
+            let m = object.transform;
+            let bounds =
+                used[object.mesh as usize].iter().fold(Aabb::EMPTY, |b, &p| b.grow(m.transform_point3(p) - origin));
+            let scale = max_scale(&m);
+            DrawObject { mesh: object.mesh, scale, bounds }
+        })
+        .collect()
+}
+
+/// The positions `mesh`'s triangles refer to, each once.
+fn used_positions(mesh: &Mesh) -> Vec<Vec3> {
+    let mut seen = vec![false; mesh.positions.len()];
+    let mut out = Vec::new();
+    for &i in &mesh.indices {
+        if let Some(s) = seen.get_mut(i as usize)
+            && !*s
+        {
+            *s = true;
+            out.push(Vec3::from(mesh.positions[i as usize]));
+        }
+    }
+    out
+}
+
+/// What the world-space layout this backend replaced uploaded for `scene`: every object's
+/// triangles (and, with `lods`, every coarser level of them) as three unshared 16-byte vertices
+/// (position + id). For reporting the saving; nothing draws from it.
+pub fn baked_upload_bytes(scene: &Scene, lods: Option<&[Vec<LodLevel>]>) -> u64 {
+    let triangles: u64 = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let coarser = lods.map_or(0, |lods| lods[o.mesh as usize].iter().skip(1).map(|l| l.faces() as u64).sum());
+            scene.meshes[o.mesh as usize].mesh.triangle_count() as u64 + coarser
+        })
+        .sum();
+    triangles * 3 * std::mem::size_of::<crate::gfx::Vertex>() as u64
 }
 
 fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
@@ -381,6 +542,18 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
         bind_group_layouts: &[Some(bind_layout)],
         immediate_size: 0,
     });
+    let buffers = [
+        Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<[f32; 3]>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &POSITION_ATTRIBUTES,
+        }),
+        Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Instance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &Instance::ATTRIBUTES,
+        }),
+    ];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some("dov id cube"),
         layout: Some(&layout),
@@ -388,7 +561,7 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
             module: &shader,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &[Some(Vertex::layout())],
+            buffers: &buffers,
         },
         // Back faces are visible surfaces too (and flagged); at equal depth the later draw
         // (lower id) wins.
@@ -438,7 +611,7 @@ impl DovBackend for GpuBackend {
         check_cube(out, r)?;
         let eye = p - self.origin;
         let validation = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let chosen = self.chosen_ranges(eye);
+        let chosen = self.chosen_levels(eye);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
                 clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
@@ -446,11 +619,25 @@ impl DovBackend for GpuBackend {
             };
             self.gpu.queue.write_buffer(&self.uniforms, face as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
         }
+        // All six faces' commands in one list; face f's start at `starts[f]`.
+        let mut commands = Vec::new();
+        let mut starts = [0usize; FACE_COUNT + 1];
+        for face in 0..FACE_COUNT {
+            self.face_commands(face, eye, &chosen, &mut commands);
+            starts[face + 1] = commands.len();
+        }
+        self.draw_commands += commands.len() as u64;
+        self.triangles_drawn +=
+            commands.iter().map(|c| u64::from(c.index_count / 3) * u64::from(c.instance_count)).sum::<u64>();
+        if let Some(indirect) = &self.indirect
+            && !commands.is_empty()
+        {
+            let bytes: Vec<u8> = commands.iter().flat_map(|c| c.as_bytes().iter().copied()).collect();
+            self.gpu.queue.write_buffer(indirect, 0, &bytes);
+        }
         let mut encoder =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
         for face in 0..FACE_COUNT {
-            let ranges = self.visible_ranges(face, eye, &chosen);
-            self.triangles_drawn += ranges.iter().map(|r| r.len() as u64 / 3).sum::<u64>();
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("dov face"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -472,14 +659,29 @@ impl DovBackend for GpuBackend {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            if let Some(vertices) = &self.vertices
-                && !ranges.is_empty()
-            {
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &self.face_bind_groups[face], &[]);
-                pass.set_vertex_buffer(0, vertices.slice(..));
-                for range in ranges {
-                    pass.draw(range, 0..1);
+            let face_commands = &commands[starts[face]..starts[face + 1]];
+            let Some(geometry) = &self.geometry else { continue };
+            if face_commands.is_empty() {
+                continue;
+            }
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.face_bind_groups[face], &[]);
+            pass.set_vertex_buffer(0, geometry.positions.slice(..));
+            pass.set_vertex_buffer(1, geometry.instances.slice(..));
+            pass.set_index_buffer(geometry.indices.slice(..), wgpu::IndexFormat::Uint32);
+            match &self.indirect {
+                Some(indirect) => {
+                    let offset = (starts[face] * std::mem::size_of::<DrawIndexedIndirectArgs>()) as u64;
+                    pass.multi_draw_indexed_indirect(indirect, offset, face_commands.len() as u32);
+                }
+                None => {
+                    for c in face_commands {
+                        pass.draw_indexed(
+                            c.first_index..c.first_index + c.index_count,
+                            c.base_vertex,
+                            c.first_instance..c.first_instance + c.instance_count,
+                        );
+                    }
                 }
             }
         }

@@ -120,6 +120,10 @@ pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub limits: wgpu::Limits,
+    /// Whether `multi_draw_indexed_indirect` runs natively with per-draw first instances: the
+    /// device has [`wgpu::Features::INDIRECT_FIRST_INSTANCE`] (requested when the adapter offers
+    /// it) and [`wgpu::DownlevelFlags::INDIRECT_EXECUTION`].
+    pub indirect_draws: bool,
 }
 
 impl Gpu {
@@ -129,13 +133,17 @@ impl Gpu {
         let adapter = request_adapter().map_err(|e| Error::Gpu(format!("no adapter: {e}")))?;
         let adapter_name = describe(&adapter.get_info());
         let limits = adapter.limits();
+        let features = adapter.features() & wgpu::Features::INDIRECT_FIRST_INSTANCE;
+        let indirect_draws = !features.is_empty()
+            && adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some(label),
+            required_features: features,
             required_limits: limits.clone(),
             ..Default::default()
         }))
         .map_err(|e| Error::Gpu(format!("{adapter_name}: no device: {e}")))?;
-        Ok(Gpu { adapter_name, device, queue, limits })
+        Ok(Gpu { adapter_name, device, queue, limits, indirect_draws })
     }
 
     /// Checks that a `width × height` texture fits the device.
@@ -150,22 +158,24 @@ impl Gpu {
     /// Uploads `vertices` into a vertex buffer; `None` when there are none. Fails when they
     /// exceed the device's buffer limit.
     pub fn upload_vertices(&self, label: &str, vertices: &[Vertex]) -> Result<Option<wgpu::Buffer>> {
-        let bytes = std::mem::size_of_val(vertices) as u64;
-        if bytes > self.limits.max_buffer_size {
-            return Err(Error::Gpu(format!(
-                "{}: {bytes} vertex bytes exceed the buffer limit {}",
-                self.adapter_name, self.limits.max_buffer_size
-            )));
-        }
         if vertices.len() > u32::MAX as usize {
             return Err(Error::Gpu(format!("{} vertices exceed u32 vertex indices", vertices.len())));
         }
-        Ok((!vertices.is_empty()).then(|| {
-            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: bytemuck::cast_slice(vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            })
+        self.upload(label, bytemuck::cast_slice(vertices), wgpu::BufferUsages::VERTEX)
+    }
+
+    /// Uploads `contents` into a new buffer of `usage` (`label` names it in errors too); `None`
+    /// when there are no bytes. Fails when they exceed the device's buffer limit.
+    pub fn upload(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> Result<Option<wgpu::Buffer>> {
+        let bytes = contents.len() as u64;
+        if bytes > self.limits.max_buffer_size {
+            return Err(Error::Gpu(format!(
+                "{}: {bytes} bytes of {label} exceed the buffer limit {}",
+                self.adapter_name, self.limits.max_buffer_size
+            )));
+        }
+        Ok((!contents.is_empty()).then(|| {
+            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
         }))
     }
 

@@ -26,7 +26,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(precompute_shard(b, &grid, &scene.all_object_bounds(), &shape, &opts, shard, &mut |_, _| {})?.cells)
     };
     let cpu = run(&mut CpuBackend::new(&scene, r)?)?;
-    let options = GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, near: None };
+    let options =
+        GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, ..Default::default() };
     let mut gpu_backend = GpuBackend::with_options(&scene, r, &options)?;
     let adapter = gpu_backend.name();
     let gpu = run(&mut gpu_backend)?;

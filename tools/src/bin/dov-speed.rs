@@ -23,7 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let grid = scene.grid.expect("the city brings a grid");
     let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
-    let lod_options = GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, near: None };
+    let lod_options =
+        GpuOptions { lods: Some(&lods), lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, ..Default::default() };
     // Corners spread over the grid: a deterministic stride through the corner ids.
     let stride = (grid.corner_count() / points).max(1);
     let at: Vec<_> =
