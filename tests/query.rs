@@ -176,7 +176,7 @@ fn the_screen_error_rule_picks_the_coarsest_level_within_its_pixels() {
 fn lod_rules_parse_and_print() {
     for (text, rule) in [
         ("dov", LodRule::Dov),
-        ("screen", LodRule::ScreenError { pixels: 1.0 }),
+        ("screen", LodRule::ScreenError { pixels: 0.5 }),
         ("screen:0.25", LodRule::ScreenError { pixels: 0.25 }),
     ] {
         assert_eq!(text.parse::<LodRule>().unwrap(), rule);

@@ -247,7 +247,7 @@ fn an_eta_of_one_in_a_thousand_keeps_psnr_and_coverage() {
             f.coverage_diff * 100.0,
             base.coverage_diff * 100.0
         );
-        // At the default LOD rule (1 pixel) the levels cost no fidelity that matters: PSNR stays
+        // At the default LOD rule (half a pixel) the levels cost no fidelity that matters: PSNR stays
         // within 1 dB of 35 dB or of what visibility alone reaches, whichever is lower.
         assert!(f.psnr >= base.psnr.min(35.0) - 1.0, "{eye}: PSNR {:.1} dB, {:.1} dB at η = 0", f.psnr, base.psnr);
         diffs.push(f.coverage_diff);

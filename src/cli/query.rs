@@ -34,8 +34,8 @@ pub struct QueryArgs {
     #[arg(long, default_value_t = 1.0)]
     tau: f64,
     /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
-    /// error is at most PIXELS, default 1, from anywhere in the cell) or `dov` (thesis eq. 5.6).
-    #[arg(long, default_value = "screen:1")]
+    /// error is at most PIXELS, default 0.5, from anywhere in the cell) or `dov` (thesis eq. 5.6).
+    #[arg(long, default_value = "screen:0.5")]
     lod_rule: LodRule,
     /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]

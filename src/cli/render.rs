@@ -36,8 +36,8 @@ pub struct RenderCmd {
     #[arg(long, default_value_t = 1.0)]
     tau: f64,
     /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
-    /// error is at most PIXELS, default 1, from anywhere in the cell) or `dov` (thesis eq. 5.6).
-    #[arg(long, default_value = "screen:1")]
+    /// error is at most PIXELS, default 0.5, from anywhere in the cell) or `dov` (thesis eq. 5.6).
+    #[arg(long, default_value = "screen:0.5")]
     lod_rule: LodRule,
     /// Colours: shaded (grey), dov (a ramp over log DoV) or lod (a palette by level).
     #[arg(long, default_value = "shaded")]

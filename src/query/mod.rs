@@ -100,7 +100,7 @@ pub enum LodRule {
 
 impl Default for LodRule {
     fn default() -> Self {
-        LodRule::ScreenError { pixels: 1.0 }
+        LodRule::ScreenError { pixels: 0.5 }
     }
 }
 

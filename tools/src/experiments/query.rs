@@ -156,10 +156,10 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     };
     let mut configs: Vec<(&str, f64, QueryParams)> = Vec::new();
     for eta in ETAS {
-        configs.push(("η, screen 1 px (default)", eta, QueryParams { eta, ..Default::default() }));
+        configs.push(("η, screen 0.5 px (default)", eta, QueryParams { eta, ..Default::default() }));
         configs.push(("η, eq. 5.6 (thesis)", eta, QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() }));
     }
-    for pixels in [0.25, 0.5, 2.0, 4.0, 8.0, 16.0, 64.0] {
+    for pixels in [0.25, 1.0, 2.0, 4.0, 8.0, 16.0, 64.0] {
         let lod_rule = LodRule::ScreenError { pixels };
         configs.push(("screen px at η = 1e-3", pixels, QueryParams { eta: 1e-3, lod_rule, ..Default::default() }));
     }
@@ -218,7 +218,7 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     bar.finish_and_clear();
     ctx.write_csv("accuracy", &csv)?;
     let rules =
-        ["η, screen 1 px (default)", "η, eq. 5.6 (thesis)", "screen px at η = 1e-3", "vmsse", "budget", "frustum"];
+        ["η, screen 0.5 px (default)", "η, eq. 5.6 (thesis)", "screen px at η = 1e-3", "vmsse", "budget", "frustum"];
     let panel = |title: &str, y: &str, i: usize, scale: f64| {
         let mut p = Panel::new(title, "PSNR against full detail (dB)", y).log_y();
         for rule in rules {

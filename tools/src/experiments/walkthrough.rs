@@ -64,7 +64,7 @@ pub fn methods(camera: Camera) -> Vec<(&'static str, SessionParams)> {
         ("VISUAL η = 0", visual(0.0, screen)),
         (VISUAL_PICTURED, visual(1e-3, screen)),
         ("VISUAL η = 8e-3", visual(8e-3, screen)),
-        ("VISUAL η = 1e-3, 0.5 px", visual(1e-3, LodRule::ScreenError { pixels: 0.5 })),
+        ("VISUAL η = 1e-3, 1 px", visual(1e-3, LodRule::ScreenError { pixels: 1.0 })),
         ("VISUAL η = 1e-3, eq. 5.6 levels (thesis)", visual(1e-3, LodRule::Dov)),
         (REVIEW_PICTURED, review(1.0, 200.0)),
         ("REVIEW SF 2, eyesight 1 km", review(2.0, 1000.0)),
