@@ -139,7 +139,7 @@ pub struct QueryParams {
     pub budget: u64,
     /// Screen-space error bound of vmsse mode, in pixels of the camera's image.
     pub tau: f64,
-    /// How threshold and naive modes pick levels (vmsse has its own, budget the thesis's).
+    /// How threshold, naive and budget modes pick levels (vmsse has its own; budget coarsens to fit).
     pub lod_rule: LodRule,
     /// With a camera, the answer is culled to its view frustum (what is drawn this frame);
     /// without, it is everything the cell may see in every direction. Vmsse mode and the

@@ -97,7 +97,7 @@ impl Traversal<'_, '_> {
         Ok(())
     }
 
-    /// The level to draw object `o` at, seen with DoV `d` (threshold, naive and vmsse modes).
+    /// The level to draw object `o` at, seen with DoV `d` (every mode but frustum).
     fn leaf_level(&self, o: u32, d: f64, mbr: &Aabb) -> usize {
         let chain = self.db.catalog().object_lods(o);
         let scale = || f64::from(max_scale(&Mat4::from_cols_array(&self.db.catalog().objects[o as usize].transform)));
@@ -244,7 +244,7 @@ impl Traversal<'_, '_> {
     }
 
     /// Thesis fig. 6.2: children in descending DoV, child i gets `remaining · d_i / D_rest`;
-    /// a leaf's LOD is `min(λ·highest + (1 − λ)·lowest, B_i)`, λ = min(DoV/MAXDOV, 1); an internal
+    /// a leaf's level is the LOD rule's, or coarser to fit B_i (the thesis: eq. 5.6's, λ = min(DoV/MAXDOV, 1)); an internal
     /// child is refined and falls back to its own LOD if the refinement overruns. Returns the
     /// faces used (more than `budget` only where coarsest LODs alone exceed it).
     fn budget(&mut self, id: u32, dov: f64, budget: u64) -> Result<u64> {
@@ -260,7 +260,7 @@ impl Traversal<'_, '_> {
             rest -= d;
             let spent = if page.node.is_leaf() {
                 let chain = self.db.catalog().object_lods(e.child);
-                let (lod, _) = fit(chain, share, pick(chain, d / MAX_DOV));
+                let (lod, _) = fit(chain, share, self.leaf_level(e.child, d, &e.mbr));
                 self.push_object(e.child, lod, d, e.mbr);
                 u64::from(chain[lod].faces)
             } else {
