@@ -16,7 +16,7 @@
 
 use std::time::Duration;
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{Affine3A, UVec2, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb as BvhAabb,
@@ -37,11 +37,22 @@ use crate::scene::Scene;
 /// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
 
+/// Texels per side of the square tiles the fast path traces one after another.
+const TILE: usize = 8;
+
+/// What the fast path carries from one texel to the next on one thread.
+#[derive(Default)]
+struct TexelState {
+    window: TieWindow,
+    /// The previous texel's winning hit: instance and triangle.
+    last: Option<(u32, u32)>,
+}
+
 /// One bottom-level BVH and its triangles in the BVH's primitive order (no indirection while
 /// tracing).
 struct Blas {
     bvh: CwBvh,
-    triangles: Vec<Triangle>,
+    triangles: Vec<RayTriangle>,
     /// Object index of each triangle: filled for the world-space BLAS, empty for a base mesh's
     /// (its instance carries the object).
     objects: Vec<u32>,
@@ -56,15 +67,118 @@ struct Instance {
     to_model: Option<Affine3A>,
 }
 
-/// The best hit of one ray so far, shared by every BLAS the ray visits.
-struct Best {
+impl Blas {
+    /// The hit of `ray` (in this BLAS's space) on triangle `i` at `t`, through instance `inst`
+    /// (number `ii`). The back-face test in the triangle's own space: with n the model-space normal
+    /// and M the linear part of the transform, the world normal of the (winding-corrected) world
+    /// triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
+    #[inline(always)]
+    fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
+        let obj = if inst.object == NO_OBJECT { self.objects[i] } else { inst.object };
+        let back = self.triangles[i].seen_from_behind(ray.direction);
+        Hit { t, obj, back, instance: ii as u32, tri: i as u32 }
+    }
+}
+
+/// A triangle with the edges and normal of obvhs's Möller–Trumbore test precomputed: the test
+/// below is [`Triangle::intersect`]'s arithmetic operation for operation (so hits and `t` are
+/// bit-identical, tested), less the two edge differences and the cross product per test.
+#[derive(Clone, Copy, Debug)]
+struct RayTriangle {
+    v0: Vec3A,
+    /// `v0 − v1` and `v2 − v0`, the order obvhs uses.
+    e1: Vec3A,
+    e2: Vec3A,
+    /// `e1 × e2`: minus the counter-clockwise normal `(v1 − v0) × (v2 − v0)`, exactly (negation
+    /// is exact in floating point).
+    n: Vec3A,
+}
+
+impl RayTriangle {
+    fn new(t: &Triangle) -> Self {
+        let (e1, e2) = (t.v0 - t.v1, t.v2 - t.v0);
+        Self { v0: t.v0, e1, e2, n: e1.cross(e2) }
+    }
+
+    /// `t` of the hit with `tmin ≤ t ≤ tmax`, or infinity.
+    #[inline(always)]
+    fn intersect(&self, ray: &Ray) -> f32 {
+        let c = self.v0 - ray.origin;
+        let r = ray.direction.cross(c);
+        let inv_det = 1.0 / self.n.dot(ray.direction);
+        let u = r.dot(self.e2) * inv_det;
+        let v = r.dot(self.e1) * inv_det;
+        let w = 1.0 - u - v;
+        // A sign bit in u, v or w (−0.0 included, as obvhs) is a miss.
+        let signs = u.to_bits() | v.to_bits() | w.to_bits();
+        if inv_det != 0.0 && signs & 0x8000_0000 == 0 {
+            let t = self.n.dot(c) * inv_det;
+            if t >= ray.tmin && t <= ray.tmax {
+                return t;
+            }
+        }
+        f32::INFINITY
+    }
+
+    /// Whether a ray along `dir` (in this triangle's space) sees its back: the counter-clockwise
+    /// normal points along the ray.
+    #[inline(always)]
+    fn seen_from_behind(&self, dir: Vec3A) -> bool {
+        self.n.dot(dir) < 0.0
+    }
+}
+
+/// One ray-triangle hit.
+#[derive(Clone, Copy, Debug)]
+struct Hit {
     t: f32,
     obj: u32,
-    /// Instance and triangle (in its BLAS's order) of the hit.
-    instance: usize,
-    tri: usize,
-    /// The smallest bound handed back to a traversal: hits beyond it cannot change the result.
-    tmax: f32,
+    back: bool,
+    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
+    instance: u32,
+    tri: u32,
+}
+
+/// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
+/// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
+/// the lowest object id in the window, its nearest triangle there, a front face before a back face
+/// at equal `t` (docs/decisions.md, 41). So any traversal order, BVH or early bound gives the id
+/// the reference tracer gives.
+#[derive(Default)]
+struct TieWindow {
+    hits: Vec<Hit>,
+    /// `t_near·(1 + ε)`: hits beyond it can no longer change the id (infinity while empty).
+    bound: f32,
+    t_near: f32,
+}
+
+impl TieWindow {
+    fn clear(&mut self) {
+        self.hits.clear();
+        self.bound = f32::INFINITY;
+        self.t_near = f32::INFINITY;
+    }
+
+    /// Adds a hit with `t ≤ self.bound`.
+    #[inline(always)]
+    fn add(&mut self, hit: Hit) {
+        if hit.t < self.t_near {
+            self.t_near = hit.t;
+            self.bound = hit.t * (1.0 + TIE_EPSILON);
+            let bound = self.bound;
+            self.hits.retain(|h| h.t <= bound);
+        }
+        self.hits.push(hit);
+    }
+
+    /// The winning hit, if any.
+    fn winner(&self) -> Option<&Hit> {
+        self.hits.iter().min_by(|a, b| a.obj.cmp(&b.obj).then(a.t.total_cmp(&b.t)).then(a.back.cmp(&b.back)))
+    }
+
+    fn id(&self) -> u32 {
+        self.winner().map_or(NO_OBJECT, |h| if h.back { h.obj | BACK_FACE_BIT } else { h.obj })
+    }
 }
 
 /// Ray casting through a two-level BVH. Building costs O(T log T) for the T stored triangles
@@ -176,56 +290,112 @@ impl CpuBackend {
     }
 
     /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
-    /// the nearest hit with `t ≥ near`, ties within [`TIE_EPSILON`] to the lower object id, with
-    /// [`BACK_FACE_BIT`] when that triangle faces away. Costs one TLAS traversal plus one BLAS
-    /// traversal per instance box the ray enters before its nearest hit.
+    /// among the hits with `t ≥ near`, those within [`TIE_EPSILON`] of the nearest are ties and the
+    /// lower object id wins, with [`BACK_FACE_BIT`] when its triangle faces away. The reference
+    /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
+    /// enters before its nearest hit's tie window.
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
+        let mut window = TieWindow::default();
+        window.clear();
         let Some(tlas) = &self.tlas else { return NO_OBJECT };
         let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
         let world_ray = Ray::new(o, d, self.near, f32::INFINITY);
-        let mut best =
-            Best { t: f32::INFINITY, obj: NO_OBJECT, instance: usize::MAX, tri: usize::MAX, tmax: f32::INFINITY };
-        let mut hit = RayHit::none();
-        tlas.ray_traverse(world_ray, &mut hit, |_, ii| {
+        tlas.ray_traverse(world_ray, &mut RayHit::none(), |_, ii| {
             let inst = &self.instances[ii];
             let blas = &self.blases[inst.blas as usize];
-            let ray = match &inst.to_model {
-                None => Ray { tmax: best.tmax, ..world_ray },
-                Some(m) => Ray::new(m.transform_point3a(o), m.transform_vector3a(d), self.near, best.tmax),
-            };
-            let mut blas_hit = RayHit::none();
-            blas.bvh.ray_traverse(ray, &mut blas_hit, |ray, i| {
+            let ray = self.instance_ray(inst, o, d, window.bound);
+            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
                 let t = blas.triangles[i].intersect(ray);
-                if !t.is_finite() {
-                    return f32::INFINITY;
+                if t.is_finite() {
+                    window.add(blas.hit(inst, ii, i, t, ray));
                 }
-                let obj = if inst.object == NO_OBJECT { blas.objects[i] } else { inst.object };
-                if t < best.t * (1.0 - TIE_EPSILON) {
-                    // Clearly nearer than everything so far.
-                    (best.t, best.obj, best.instance, best.tri) = (t, obj, ii, i);
-                } else if obj < best.obj || (obj == best.obj && t < best.t) {
-                    // A tie with the best (t was accepted, so t ≤ best.t·(1+ε)): lower id wins.
-                    (best.t, best.obj, best.instance, best.tri) = (t.min(best.t), obj, ii, i);
-                }
-                // Keep accepting hits inside the tie window behind this one.
-                let bound = t * (1.0 + TIE_EPSILON);
-                best.tmax = best.tmax.min(bound);
-                bound
+                window.bound
             });
-            // Instance boxes beyond the tie window of the best hit cannot change the result.
-            best.tmax
+            // Instance boxes beyond the tie window of the nearest hit cannot change the result.
+            window.bound
         });
-        if best.obj == NO_OBJECT {
-            return NO_OBJECT;
+        window.id()
+    }
+
+    /// The ray of `inst`'s BLAS: the world ray, or carried into model space by the inverse
+    /// transform (direction not normalised, so `t` is the same in both spaces).
+    #[inline(always)]
+    fn instance_ray(&self, inst: &Instance, o: Vec3A, d: Vec3A, tmax: f32) -> Ray {
+        match &inst.to_model {
+            None => Ray::new(o, d, self.near, tmax),
+            Some(m) => Ray::new(m.transform_point3a(o), m.transform_vector3a(d), self.near, tmax),
         }
-        // The back-face test in the hit triangle's own space: with n = e1×e2 in model space and
-        // M the linear part of the transform, the world normal of the (winding-corrected) world
-        // triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
-        let inst = &self.instances[best.instance];
-        let dir = inst.to_model.map_or(d, |m| m.transform_vector3a(d));
-        let tri = &self.blases[inst.blas as usize].triangles[best.tri];
-        let normal = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
-        if normal.dot(dir) > 0.0 { best.obj | BACK_FACE_BIT } else { best.obj }
+    }
+
+    /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
+    /// tested first, so the traversal starts with the tie window of a (usually the) nearest hit
+    /// and skips every box behind it; a scene whose TLAS holds one instance (no instancing) goes
+    /// straight to its BLAS; triangles carry their precomputed edges. The id depends only on the
+    /// set of hits in the tie window, which every route finds whole, so it equals `trace`'s.
+    #[inline]
+    fn trace_fast(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
+        let window = &mut state.window;
+        window.clear();
+        if let Some((ii, i)) = state.last {
+            let inst = &self.instances[ii as usize];
+            let blas = &self.blases[inst.blas as usize];
+            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
+            let t = blas.triangles[i as usize].intersect(&ray);
+            if t.is_finite() {
+                window.add(blas.hit(inst, ii as usize, i as usize, t, &ray));
+            }
+        }
+        match &self.tlas {
+            None => {}
+            Some(_) if self.instances.len() == 1 => self.traverse_blas(0, o, d, window),
+            Some(tlas) => {
+                let mut ray = Ray::new(o, d, self.near, window.bound);
+                let mut traversal = tlas.new_traversal(ray.direction);
+                let mut node;
+                obvhs::traverse!(tlas, node, traversal, node.intersect_ray(&ray, traversal.oct_inv4), {
+                    self.traverse_blas(traversal.primitive_id as usize, o, d, window);
+                    ray.tmax = window.bound;
+                });
+            }
+        }
+        state.last = window.winner().map(|h| (h.instance, h.tri));
+        window.id()
+    }
+
+    /// Adds to `window` the hits of instance `ii`'s BLAS nearer than its bound.
+    #[inline(always)]
+    fn traverse_blas(&self, ii: usize, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        let inst = &self.instances[ii];
+        let blas = &self.blases[inst.blas as usize];
+        let mut ray = self.instance_ray(inst, o, d, window.bound);
+        let mut traversal = blas.bvh.new_traversal(ray.direction);
+        let mut node;
+        obvhs::traverse!(blas.bvh, node, traversal, node.intersect_ray(&ray, traversal.oct_inv4), {
+            let i = traversal.primitive_id as usize;
+            let t = blas.triangles[i].intersect(&ray);
+            if t.is_finite() {
+                window.add(blas.hit(inst, ii, i, t, &ray));
+                ray.tmax = window.bound;
+            }
+        });
+    }
+
+    /// The id cube from `p` by [`CpuBackend::trace`], one ray after another on the calling thread:
+    /// the straightforward tracer that [`DovBackend::render_ids`] must equal texel for texel
+    /// (tests), and the "before" of the per-ray speed figures (tools/src/bin/ray-speed.rs).
+    pub fn render_ids_reference(&self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        check_point(p)?;
+        check_cube(out, self.cube.resolution())?;
+        let r = self.cube.resolution();
+        let mut ids = out.ids.iter_mut();
+        for face in 0..cubemap::FACE_COUNT {
+            for row in 0..r {
+                for col in 0..r {
+                    *ids.next().expect("checked length") = self.trace(p, self.cube.texel_direction(face, row, col));
+                }
+            }
+        }
+        Ok(())
     }
 }
 
@@ -247,12 +417,22 @@ impl DovBackend for CpuBackend {
         check_cube(out, self.cube.resolution())?;
         let r = self.cube.resolution() as usize;
         let this = &*self;
-        // One rayon task per texel row: rows are long enough to amortise scheduling.
-        out.ids.par_chunks_mut(r).enumerate().for_each(|(face_row, ids)| {
-            let face = face_row / r;
-            let row = (face_row % r) as u32;
-            for (col, id) in ids.iter_mut().enumerate() {
-                *id = this.trace(p, this.cube.texel_direction(face, row, col as u32));
+        let o = Vec3A::from(p);
+        // One rayon task per band of TILE rows of a face, traced tile by tile: neighbouring rays
+        // share BVH nodes (in cache) and, mostly, their nearest triangle (tested first).
+        let bands = out.ids.par_chunks_mut(r * r).enumerate().flat_map(|(face, ids)| {
+            ids.par_chunks_mut(r * TILE).enumerate().map(move |(band, ids)| (face, band * TILE, ids))
+        });
+        bands.for_each_init(TexelState::default, |state, (face, row0, ids)| {
+            state.last = None;
+            let rows = ids.len() / r;
+            for col0 in (0..r).step_by(TILE) {
+                for dr in 0..rows {
+                    for col in col0..(col0 + TILE).min(r) {
+                        let d = this.cube.texel_direction(face, (row0 + dr) as u32, col as u32);
+                        ids[dr * r + col] = this.trace_fast(o, Vec3A::from(d), state);
+                    }
+                }
             }
         });
         Ok(())
@@ -281,7 +461,7 @@ fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
         return None;
     }
     let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-    let triangles = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
+    let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
     let objects =
         if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
     Some(Blas { bvh, triangles, objects })
@@ -364,4 +544,65 @@ pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn vec3a() -> impl Strategy<Value = Vec3A> {
+        // Small integers make degenerate, edge-on and exactly-on-edge cases common.
+        prop_oneof![
+            [-4.0f32..4.0, -4.0..4.0, -4.0..4.0].prop_map(Vec3A::from),
+            [-2i8..3, -2..3, -2..3].prop_map(|v| Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32)),
+        ]
+    }
+
+    proptest! {
+        /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may
+        /// then differ in nothing but the order in which they meet triangles.
+        #[test]
+        fn ray_triangle_is_obvhs_triangle_bit_for_bit(
+            v in [vec3a(), vec3a(), vec3a()], o in vec3a(), d in vec3a(), tmin in 0.0f32..0.5, tmax in 0.5f32..20.0,
+        ) {
+            let tri = Triangle { v0: v[0], v1: v[1], v2: v[2] };
+            let ray = Ray { origin: o, direction: d, inv_direction: d.recip(), tmin, tmax };
+            prop_assert_eq!(RayTriangle::new(&tri).intersect(&ray).to_bits(), tri.intersect(&ray).to_bits());
+            // The back-face sign: e1 × e2 is minus (v1 − v0) × (v2 − v0), exactly.
+            let ccw = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
+            prop_assert_eq!(RayTriangle::new(&tri).seen_from_behind(d), ccw.dot(d) > 0.0);
+        }
+
+        /// The tie window's id does not depend on the order hits arrive in (as long as each is
+        /// within the bound at its arrival, as a traversal guarantees).
+        #[test]
+        fn tie_window_id_ignores_hit_order(
+            hits in prop::collection::vec((0u32..4, 0u32..6, any::<bool>()), 1..12), seed in any::<u64>(),
+        ) {
+            // t values 1 + k·4e-6: neighbours tie, the far ones chain beyond one window.
+            let hits: Vec<Hit> = hits
+                .iter()
+                .enumerate()
+                .map(|(i, &(k, obj, back))| Hit { t: 1.0 + k as f32 * 4e-6, obj, back, instance: 0, tri: i as u32 })
+                .collect();
+            let id = |order: &[Hit]| {
+                let mut w = TieWindow::default();
+                w.clear();
+                for h in order {
+                    if h.t <= w.bound {
+                        w.add(*h);
+                    }
+                }
+                w.id()
+            };
+            let mut shuffled = hits.clone();
+            let mut s = seed;
+            for i in (1..shuffled.len()).rev() {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                shuffled.swap(i, (s >> 33) as usize % (i + 1));
+            }
+            prop_assert_eq!(id(&hits), id(&shuffled));
+        }
+    }
 }
