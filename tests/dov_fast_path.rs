@@ -81,16 +81,20 @@ proptest! {
     ) {
         let scene = scene_of(&specs);
         let mut backend = CpuBackend::with_near(&scene, r, near).unwrap();
-        let (mut fast, mut reference) = (IdCube::new(r), IdCube::new(r));
-        backend.render_ids(p, &mut fast).unwrap();
+        let mut reference = IdCube::new(r);
         backend.render_ids_reference(p, &mut reference).unwrap();
-        let differing: Vec<usize> = (0..fast.ids.len()).filter(|&i| fast.ids[i] != reference.ids[i]).collect();
-        prop_assert!(differing.is_empty(), "{} texels differ, first at {:?}", differing.len(), differing.first());
+        for wide in [false, true] {
+            backend.set_wide_instructions(wide);
+            let mut fast = IdCube::new(r);
+            backend.render_ids(p, &mut fast).unwrap();
+            let differing: Vec<usize> = (0..fast.ids.len()).filter(|&i| fast.ids[i] != reference.ids[i]).collect();
+            prop_assert!(differing.is_empty(), "wide {wide}: {} texels differ, first at {:?}", differing.len(), differing.first());
+        }
     }
 }
 
 /// A scene with many objects per ray (the engine-like case the previous-hit bound is for): the
-/// fast path on a 1-thread pool and on the default pool both equal the reference.
+/// fast path on a 1-thread pool and on the default pool, portable and wide, all equal the reference.
 #[test]
 fn fast_path_equals_reference_on_a_box_field_on_any_pool() {
     let scene = box_field(300, 11, true);
@@ -98,12 +102,16 @@ fn fast_path_equals_reference_on_a_box_field_on_any_pool() {
     let mut backend = CpuBackend::new(&scene, r).unwrap();
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     for p in [Vec3::new(0.0, 1.5, 0.0), Vec3::new(13.0, 4.0, -7.0)] {
-        let (mut fast, mut pooled, mut reference) = (IdCube::new(r), IdCube::new(r), IdCube::new(r));
-        one.install(|| backend.render_ids(p, &mut fast)).unwrap();
-        backend.render_ids(p, &mut pooled).unwrap();
+        let mut reference = IdCube::new(r);
         backend.render_ids_reference(p, &mut reference).unwrap();
         assert!(reference.ids.iter().filter(|&&id| id != hdov::dov::NO_OBJECT).count() > 100, "the point sees objects");
-        assert_eq!(fast.ids, reference.ids);
-        assert_eq!(pooled.ids, reference.ids);
+        for wide in [false, true] {
+            backend.set_wide_instructions(wide);
+            let (mut fast, mut pooled) = (IdCube::new(r), IdCube::new(r));
+            one.install(|| backend.render_ids(p, &mut fast)).unwrap();
+            backend.render_ids(p, &mut pooled).unwrap();
+            assert_eq!(fast.ids, reference.ids, "wide {wide}, one thread");
+            assert_eq!(pooled.ids, reference.ids, "wide {wide}, default pool");
+        }
     }
 }

@@ -23,6 +23,7 @@ use obvhs::{
     cwbvh::{
         CwBvh,
         builder::{build_cwbvh, build_cwbvh_from_tris},
+        node::{CwBvhNode, extract_byte64},
     },
     ray::{Ray, RayHit},
     triangle::Triangle,
@@ -193,6 +194,8 @@ pub struct CpuBackend {
     blases: Vec<Blas>,
     /// Triangles of the scene with instances counted each time (for [`DovBackend::name`]).
     triangle_count: u64,
+    /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
+    wide: bool,
 }
 
 /// What one BLAS is built from.
@@ -282,11 +285,18 @@ impl CpuBackend {
             instances,
             blases: kept,
             triangle_count: scene.triangle_count(),
+            wide: wide_instructions(),
         })
     }
 
     pub fn near(&self) -> f32 {
         self.near
+    }
+
+    /// Lets `render_ids` use the AVX2 build of its tracer where the CPU has one (the default), or
+    /// keeps it to the portable build (tests compare both; the ids are the same).
+    pub fn set_wide_instructions(&mut self, on: bool) {
+        self.wide = on && wide_instructions();
     }
 
     /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
@@ -332,8 +342,8 @@ impl CpuBackend {
     /// and skips every box behind it; a scene whose TLAS holds one instance (no instancing) goes
     /// straight to its BLAS; triangles carry their precomputed edges. The id depends only on the
     /// set of hits in the tie window, which every route finds whole, so it equals `trace`'s.
-    #[inline]
-    fn trace_fast(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
+    #[inline(always)]
+    fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
         let window = &mut state.window;
         window.clear();
         if let Some((ii, i)) = state.last {
@@ -347,30 +357,33 @@ impl CpuBackend {
         }
         match &self.tlas {
             None => {}
-            Some(_) if self.instances.len() == 1 => self.traverse_blas(0, o, d, window),
+            Some(_) if self.instances.len() == 1 => self.traverse_blas::<WIDE>(0, o, d, window),
             Some(tlas) => {
                 let mut ray = Ray::new(o, d, self.near, window.bound);
                 let mut traversal = tlas.new_traversal(ray.direction);
                 let mut node;
-                obvhs::traverse!(tlas, node, traversal, node.intersect_ray(&ray, traversal.oct_inv4), {
-                    self.traverse_blas(traversal.primitive_id as usize, o, d, window);
+                obvhs::traverse!(tlas, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
+                    self.traverse_blas::<WIDE>(traversal.primitive_id as usize, o, d, window);
                     ray.tmax = window.bound;
                 });
             }
         }
-        state.last = window.winner().map(|h| (h.instance, h.tri));
+        // A miss keeps the last hit: the next ray may well hit it.
+        if let Some(h) = window.winner() {
+            state.last = Some((h.instance, h.tri));
+        }
         window.id()
     }
 
     /// Adds to `window` the hits of instance `ii`'s BLAS nearer than its bound.
     #[inline(always)]
-    fn traverse_blas(&self, ii: usize, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+    fn traverse_blas<const WIDE: bool>(&self, ii: usize, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
         let inst = &self.instances[ii];
         let blas = &self.blases[inst.blas as usize];
         let mut ray = self.instance_ray(inst, o, d, window.bound);
         let mut traversal = blas.bvh.new_traversal(ray.direction);
         let mut node;
-        obvhs::traverse!(blas.bvh, node, traversal, node.intersect_ray(&ray, traversal.oct_inv4), {
+        obvhs::traverse!(blas.bvh, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
             let i = traversal.primitive_id as usize;
             let t = blas.triangles[i].intersect(&ray);
             if t.is_finite() {
@@ -423,19 +436,114 @@ impl DovBackend for CpuBackend {
         let bands = out.ids.par_chunks_mut(r * r).enumerate().flat_map(|(face, ids)| {
             ids.par_chunks_mut(r * TILE).enumerate().map(move |(band, ids)| (face, band * TILE, ids))
         });
+        let wide = self.wide;
         bands.for_each_init(TexelState::default, |state, (face, row0, ids)| {
-            state.last = None;
-            let rows = ids.len() / r;
-            for col0 in (0..r).step_by(TILE) {
-                for dr in 0..rows {
-                    for col in col0..(col0 + TILE).min(r) {
-                        let d = this.cube.texel_direction(face, (row0 + dr) as u32, col as u32);
-                        ids[dr * r + col] = this.trace_fast(o, Vec3A::from(d), state);
-                    }
-                }
+            #[cfg(target_arch = "x86_64")]
+            if wide {
+                // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+                return unsafe { this.trace_band_wide(o, face, row0, ids, state) };
             }
+            this.trace_band::<false>(o, face, row0, ids, state);
         });
         Ok(())
+    }
+}
+
+/// The children of `node` that `ray` enters (obvhs's hit mask). `WIDE` (only inside
+/// [`CpuBackend::trace_band_wide`]) tests all eight children in one AVX2 pass, with the operations
+/// of obvhs's four-wide `intersect_ray_simd` lane by lane (the same products, sums, min/max and
+/// `≤`), so the same children are entered; obvhs converts the quantised bounds one byte at a
+/// time, the costliest part of its test, which AVX2 does in one instruction.
+#[inline(always)]
+fn intersect_node<const WIDE: bool>(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: WIDE is only instantiated under `trace_band_wide`, whose CPU has AVX2.
+        return unsafe { intersect_node_avx2(node, ray, oct_inv4) };
+    }
+    node.intersect_ray(ray, oct_inv4)
+}
+
+/// obvhs's lower bound on a child's entry distance (its private `EPSILON`).
+const NODE_TMIN: f32 = 0.0001;
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn intersect_node_avx2(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    use std::arch::x86_64::*;
+    let adj_dir = node.compute_extent() * ray.inv_direction;
+    let adj_origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    // SAFETY (all intrinsics): AVX2 is present (see `intersect_node`); each load reads 8 bytes.
+    unsafe {
+        let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(b.as_ptr().cast())));
+        let slab = |lo: &[u8; 8], hi: &[u8; 8], negative: bool, dir: f32, origin: f32| {
+            let (lo, hi) = (q(lo), q(hi));
+            let (near, far) = if negative { (hi, lo) } else { (lo, hi) };
+            let (dir, origin) = (_mm256_set1_ps(dir), _mm256_set1_ps(origin));
+            (_mm256_add_ps(_mm256_mul_ps(near, dir), origin), _mm256_add_ps(_mm256_mul_ps(far, dir), origin))
+        };
+        let d = ray.direction;
+        let (tmin_x, tmax_x) = slab(&node.child_min_x, &node.child_max_x, d.x < 0.0, adj_dir.x, adj_origin.x);
+        let (tmin_y, tmax_y) = slab(&node.child_min_y, &node.child_max_y, d.y < 0.0, adj_dir.y, adj_origin.y);
+        let (tmin_z, tmax_z) = slab(&node.child_min_z, &node.child_max_z, d.z < 0.0, adj_dir.z, adj_origin.z);
+        let tmin = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+        let tmax = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+        let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_TMIN));
+        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray.tmax));
+        let mut entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32;
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+        let mut hit_mask = 0u32;
+        while entered != 0 {
+            let slot = entered.trailing_zeros() as usize;
+            entered &= entered - 1;
+            hit_mask |= extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot);
+        }
+        hit_mask
+    }
+}
+
+/// Whether this CPU runs [`CpuBackend::trace_band_wide`] (x86-64 with AVX2, FMA, BMI1/2, LZCNT and
+/// POPCNT: every x86-64 since 2013).
+fn wide_instructions() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+impl CpuBackend {
+    /// Traces the texels of `rows` rows (`ids.len() / R`) of `face` from `row0`, tile by tile.
+    #[inline(always)]
+    fn trace_band<const WIDE: bool>(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+        let r = self.cube.resolution() as usize;
+        state.last = None;
+        let rows = ids.len() / r;
+        for col0 in (0..r).step_by(TILE) {
+            let col1 = (col0 + TILE).min(r);
+            for dr in 0..rows {
+                for col in col0..col1 {
+                    let d = self.cube.texel_direction(face, (row0 + dr) as u32, col as u32);
+                    ids[dr * r + col] = self.trace_fast::<WIDE>(o, Vec3A::from(d), state);
+                }
+            }
+        }
+    }
+
+    /// [`CpuBackend::trace_band`] compiled for newer x86-64 CPUs, as Embree picks its kernels at
+    /// run time. The traversal counts and finds bits per node (one instruction each with POPCNT and
+    /// LZCNT, a dozen without); the arithmetic is the same operations (Rust never fuses a
+    /// multiply-add by itself), so the ids are bit-identical (tests/dov_fast_path.rs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn trace_band_wide(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+        self.trace_band::<true>(o, face, row0, ids, state)
     }
 }
 
@@ -460,7 +568,9 @@ fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
     if tris.is_empty() {
         return None;
     }
-    let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
+    // The slowest preset (pre-splits, full reinsertion): 19 % fewer ray-traversal costs than the
+    // medium build on the engine of docs/dov.md for 3× the build time (docs/decisions.md, 42).
+    let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::very_slow_build(), &mut Duration::default());
     let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
     let objects =
         if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
