@@ -338,23 +338,39 @@ impl CpuBackend {
     }
 
     /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
-    /// tested first, so the traversal starts with the tie window of a (usually the) nearest hit
-    /// and skips every box behind it; a scene whose TLAS holds one instance (no instancing) goes
-    /// straight to its BLAS; triangles carry their precomputed edges. The id depends only on the
-    /// set of hits in the tie window, which every route finds whole, so it equals `trace`'s.
+    /// tested first, and its tie window bounds the traversal from the start, which then skips
+    /// every box behind it; a scene whose TLAS holds one instance (no instancing) goes straight to
+    /// its BLAS; triangles carry their precomputed edges. The id depends only on the set of hits
+    /// the BVH lets through inside the tie window, which every route finds whole, so it equals
+    /// `trace`'s. The bound is only trusted once the traversal itself reaches a hit at least as
+    /// near: a ray grazing a box edge can hit a triangle whose box test it fails (rounding), and
+    /// the reference would not see that hit; then the ray is traced again without the bound.
     #[inline(always)]
     fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
         let window = &mut state.window;
         window.clear();
+        let mut hint_t = f32::INFINITY;
         if let Some((ii, i)) = state.last {
             let inst = &self.instances[ii as usize];
-            let blas = &self.blases[inst.blas as usize];
             let ray = self.instance_ray(inst, o, d, f32::INFINITY);
-            let t = blas.triangles[i as usize].intersect(&ray);
-            if t.is_finite() {
-                window.add(blas.hit(inst, ii as usize, i as usize, t, &ray));
-            }
+            hint_t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
+            window.bound = hint_t * (1.0 + TIE_EPSILON);
         }
+        self.traverse_all::<WIDE>(o, d, window);
+        if window.t_near > hint_t {
+            window.clear();
+            self.traverse_all::<WIDE>(o, d, window);
+        }
+        // A miss keeps the last hit: the next ray may well hit it.
+        if let Some(h) = window.winner() {
+            state.last = Some((h.instance, h.tri));
+        }
+        window.id()
+    }
+
+    /// Adds to `window` the hits of every instance nearer than its bound.
+    #[inline(always)]
+    fn traverse_all<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
         match &self.tlas {
             None => {}
             Some(_) if self.instances.len() == 1 => self.traverse_blas::<WIDE>(0, o, d, window),
@@ -368,11 +384,6 @@ impl CpuBackend {
                 });
             }
         }
-        // A miss keeps the last hit: the next ray may well hit it.
-        if let Some(h) = window.winner() {
-            state.last = Some((h.instance, h.tri));
-        }
-        window.id()
     }
 
     /// Adds to `window` the hits of instance `ii`'s BLAS nearer than its bound.
@@ -521,7 +532,14 @@ fn wide_instructions() -> bool {
 impl CpuBackend {
     /// Traces the texels of `rows` rows (`ids.len() / R`) of `face` from `row0`, tile by tile.
     #[inline(always)]
-    fn trace_band<const WIDE: bool>(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+    fn trace_band<const WIDE: bool>(
+        &self,
+        o: Vec3A,
+        face: usize,
+        row0: usize,
+        ids: &mut [u32],
+        state: &mut TexelState,
+    ) {
         let r = self.cube.resolution() as usize;
         state.last = None;
         let rows = ids.len() / r;

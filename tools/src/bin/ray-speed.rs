@@ -82,7 +82,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (ms_reference, ms_fast) = (ms(t_reference), ms(t_fast));
     let speed = |label: &str, cpu_ms: f64, wall: Duration| {
         let wall_ms = ms(wall);
-        println!("{label}: {cpu_ms:.2} ms CPU per point, {:.2} M rays/s per thread (wall {wall_ms:.2} ms)", rays / cpu_ms / 1e3);
+        println!(
+            "{label}: {cpu_ms:.2} ms CPU per point, {:.2} M rays/s per thread (wall {wall_ms:.2} ms)",
+            rays / cpu_ms / 1e3
+        );
     };
     speed("reference tracer", ms_reference, wall_reference);
     speed("fast render_ids ", ms_fast, wall_fast);
