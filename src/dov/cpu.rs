@@ -10,6 +10,10 @@
 //! city without its instances a TLAS over 10 941 single-use meshes cost 22 % more CPU per sample
 //! point than one world-space BLAS (docs/dov.md, speed).
 //!
+//! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
+//! triangle, with an AVX2 copy of the tracer chosen at run time; [`CpuBackend::render_ids_reference`]
+//! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
+//!
 //! A ray entering an instance's box (nearer than the best hit so far) is carried into model space
 //! by the inverse transform, direction not normalised, so the ray parameter `t` is the same in
 //! every space and hits of different instances compare directly.
