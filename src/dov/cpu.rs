@@ -42,6 +42,9 @@ use crate::scene::Scene;
 /// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
 
+/// The largest BLAS built with obvhs's very slow preset; bigger ones get the slow preset.
+const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;
+
 /// Texels per side of the square tiles the fast path traces one after another.
 const TILE: usize = 8;
 
@@ -590,9 +593,16 @@ fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
     if tris.is_empty() {
         return None;
     }
-    // The slowest preset (pre-splits, full reinsertion): 19 % fewer ray-traversal costs than the
-    // medium build on the engine of docs/dov.md for 3× the build time (docs/decisions.md, 42).
-    let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::very_slow_build(), &mut Duration::default());
+    // Pre-split builds: per ray, the slow preset took 33 % less time than the medium one on the
+    // default city and the very slow one 19 % less on the 110 k-triangle engine (the slow one
+    // 15 %), but the very slow build took 6.5× the medium one on the city's 2.2 M triangles
+    // (the slow 2.5×): the very slow one only where it stays cheap (docs/decisions.md, 42).
+    let params = if tris.len() <= VERY_SLOW_BUILD_MAX_TRIANGLES {
+        BvhBuildParams::very_slow_build()
+    } else {
+        BvhBuildParams::slow_build()
+    };
+    let bvh = build_cwbvh_from_tris(&tris, params, &mut Duration::default());
     let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
     let objects =
         if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
