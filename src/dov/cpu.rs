@@ -10,19 +10,24 @@
 //! city without its instances a TLAS over 10 941 single-use meshes cost 22 % more CPU per sample
 //! point than one world-space BLAS (docs/dov.md, speed).
 //!
+//! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
+//! triangle, with an AVX2 copy of the tracer chosen at run time; [`CpuBackend::render_ids_reference`]
+//! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
+//!
 //! A ray entering an instance's box (nearer than the best hit so far) is carried into model space
 //! by the inverse transform, direction not normalised, so the ray parameter `t` is the same in
 //! every space and hits of different instances compare directly.
 
 use std::time::Duration;
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{Affine3A, UVec2, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb as BvhAabb,
     cwbvh::{
         CwBvh,
         builder::{build_cwbvh, build_cwbvh_from_tris},
+        node::{CwBvhNode, extract_byte64},
     },
     ray::{Ray, RayHit},
     triangle::Triangle,
@@ -37,11 +42,25 @@ use crate::scene::Scene;
 /// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
 
+/// The largest BLAS built with obvhs's very slow preset; bigger ones get the slow preset.
+const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;
+
+/// Texels per side of the square tiles the fast path traces one after another.
+const TILE: usize = 8;
+
+/// What the fast path carries from one texel to the next on one thread.
+#[derive(Default)]
+struct TexelState {
+    window: TieWindow,
+    /// The previous texel's winning hit: instance and triangle.
+    last: Option<(u32, u32)>,
+}
+
 /// One bottom-level BVH and its triangles in the BVH's primitive order (no indirection while
 /// tracing).
 struct Blas {
     bvh: CwBvh,
-    triangles: Vec<Triangle>,
+    triangles: Vec<RayTriangle>,
     /// Object index of each triangle: filled for the world-space BLAS, empty for a base mesh's
     /// (its instance carries the object).
     objects: Vec<u32>,
@@ -56,15 +75,118 @@ struct Instance {
     to_model: Option<Affine3A>,
 }
 
-/// The best hit of one ray so far, shared by every BLAS the ray visits.
-struct Best {
+impl Blas {
+    /// The hit of `ray` (in this BLAS's space) on triangle `i` at `t`, through instance `inst`
+    /// (number `ii`). The back-face test in the triangle's own space: with n the model-space normal
+    /// and M the linear part of the transform, the world normal of the (winding-corrected) world
+    /// triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
+    #[inline(always)]
+    fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
+        let obj = if inst.object == NO_OBJECT { self.objects[i] } else { inst.object };
+        let back = self.triangles[i].seen_from_behind(ray.direction);
+        Hit { t, obj, back, instance: ii as u32, tri: i as u32 }
+    }
+}
+
+/// A triangle with the edges and normal of obvhs's Möller–Trumbore test precomputed: the test
+/// below is [`Triangle::intersect`]'s arithmetic operation for operation (so hits and `t` are
+/// bit-identical, tested), less the two edge differences and the cross product per test.
+#[derive(Clone, Copy, Debug)]
+struct RayTriangle {
+    v0: Vec3A,
+    /// `v0 − v1` and `v2 − v0`, the order obvhs uses.
+    e1: Vec3A,
+    e2: Vec3A,
+    /// `e1 × e2`: minus the counter-clockwise normal `(v1 − v0) × (v2 − v0)`, exactly (negation
+    /// is exact in floating point).
+    n: Vec3A,
+}
+
+impl RayTriangle {
+    fn new(t: &Triangle) -> Self {
+        let (e1, e2) = (t.v0 - t.v1, t.v2 - t.v0);
+        Self { v0: t.v0, e1, e2, n: e1.cross(e2) }
+    }
+
+    /// `t` of the hit with `tmin ≤ t ≤ tmax`, or infinity.
+    #[inline(always)]
+    fn intersect(&self, ray: &Ray) -> f32 {
+        let c = self.v0 - ray.origin;
+        let r = ray.direction.cross(c);
+        let inv_det = 1.0 / self.n.dot(ray.direction);
+        let u = r.dot(self.e2) * inv_det;
+        let v = r.dot(self.e1) * inv_det;
+        let w = 1.0 - u - v;
+        // A sign bit in u, v or w (−0.0 included, as obvhs) is a miss.
+        let signs = u.to_bits() | v.to_bits() | w.to_bits();
+        if inv_det != 0.0 && signs & 0x8000_0000 == 0 {
+            let t = self.n.dot(c) * inv_det;
+            if t >= ray.tmin && t <= ray.tmax {
+                return t;
+            }
+        }
+        f32::INFINITY
+    }
+
+    /// Whether a ray along `dir` (in this triangle's space) sees its back: the counter-clockwise
+    /// normal points along the ray.
+    #[inline(always)]
+    fn seen_from_behind(&self, dir: Vec3A) -> bool {
+        self.n.dot(dir) < 0.0
+    }
+}
+
+/// One ray-triangle hit.
+#[derive(Clone, Copy, Debug)]
+struct Hit {
     t: f32,
     obj: u32,
-    /// Instance and triangle (in its BLAS's order) of the hit.
-    instance: usize,
-    tri: usize,
-    /// The smallest bound handed back to a traversal: hits beyond it cannot change the result.
-    tmax: f32,
+    back: bool,
+    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
+    instance: u32,
+    tri: u32,
+}
+
+/// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
+/// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
+/// the lowest object id in the window, its nearest triangle there, a front face before a back face
+/// at equal `t` (docs/decisions.md, 41). So any traversal order, BVH or early bound gives the id
+/// the reference tracer gives.
+#[derive(Default)]
+struct TieWindow {
+    hits: Vec<Hit>,
+    /// `t_near·(1 + ε)`: hits beyond it can no longer change the id (infinity while empty).
+    bound: f32,
+    t_near: f32,
+}
+
+impl TieWindow {
+    fn clear(&mut self) {
+        self.hits.clear();
+        self.bound = f32::INFINITY;
+        self.t_near = f32::INFINITY;
+    }
+
+    /// Adds a hit with `t ≤ self.bound`.
+    #[inline(always)]
+    fn add(&mut self, hit: Hit) {
+        if hit.t < self.t_near {
+            self.t_near = hit.t;
+            self.bound = hit.t * (1.0 + TIE_EPSILON);
+            let bound = self.bound;
+            self.hits.retain(|h| h.t <= bound);
+        }
+        self.hits.push(hit);
+    }
+
+    /// The winning hit, if any.
+    fn winner(&self) -> Option<&Hit> {
+        self.hits.iter().min_by(|a, b| a.obj.cmp(&b.obj).then(a.t.total_cmp(&b.t)).then(a.back.cmp(&b.back)))
+    }
+
+    fn id(&self) -> u32 {
+        self.winner().map_or(NO_OBJECT, |h| if h.back { h.obj | BACK_FACE_BIT } else { h.obj })
+    }
 }
 
 /// Ray casting through a two-level BVH. Building costs O(T log T) for the T stored triangles
@@ -79,6 +201,8 @@ pub struct CpuBackend {
     blases: Vec<Blas>,
     /// Triangles of the scene with instances counted each time (for [`DovBackend::name`]).
     triangle_count: u64,
+    /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
+    wide: bool,
 }
 
 /// What one BLAS is built from.
@@ -168,6 +292,7 @@ impl CpuBackend {
             instances,
             blases: kept,
             triangle_count: scene.triangle_count(),
+            wide: wide_instructions(),
         })
     }
 
@@ -175,57 +300,133 @@ impl CpuBackend {
         self.near
     }
 
+    /// Lets `render_ids` use the AVX2 build of its tracer where the CPU has one (the default), or
+    /// keeps it to the portable build (tests compare both; the ids are the same).
+    pub fn set_wide_instructions(&mut self, on: bool) {
+        self.wide = on && wide_instructions();
+    }
+
     /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
-    /// the nearest hit with `t ≥ near`, ties within [`TIE_EPSILON`] to the lower object id, with
-    /// [`BACK_FACE_BIT`] when that triangle faces away. Costs one TLAS traversal plus one BLAS
-    /// traversal per instance box the ray enters before its nearest hit.
+    /// among the hits with `t ≥ near`, those within [`TIE_EPSILON`] of the nearest are ties and the
+    /// lower object id wins, with [`BACK_FACE_BIT`] when its triangle faces away. The reference
+    /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
+    /// enters before its nearest hit's tie window.
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
+        let mut window = TieWindow::default();
+        window.clear();
         let Some(tlas) = &self.tlas else { return NO_OBJECT };
         let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
         let world_ray = Ray::new(o, d, self.near, f32::INFINITY);
-        let mut best =
-            Best { t: f32::INFINITY, obj: NO_OBJECT, instance: usize::MAX, tri: usize::MAX, tmax: f32::INFINITY };
-        let mut hit = RayHit::none();
-        tlas.ray_traverse(world_ray, &mut hit, |_, ii| {
+        tlas.ray_traverse(world_ray, &mut RayHit::none(), |_, ii| {
             let inst = &self.instances[ii];
             let blas = &self.blases[inst.blas as usize];
-            let ray = match &inst.to_model {
-                None => Ray { tmax: best.tmax, ..world_ray },
-                Some(m) => Ray::new(m.transform_point3a(o), m.transform_vector3a(d), self.near, best.tmax),
-            };
-            let mut blas_hit = RayHit::none();
-            blas.bvh.ray_traverse(ray, &mut blas_hit, |ray, i| {
+            let ray = self.instance_ray(inst, o, d, window.bound);
+            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
                 let t = blas.triangles[i].intersect(ray);
-                if !t.is_finite() {
-                    return f32::INFINITY;
+                if t.is_finite() {
+                    window.add(blas.hit(inst, ii, i, t, ray));
                 }
-                let obj = if inst.object == NO_OBJECT { blas.objects[i] } else { inst.object };
-                if t < best.t * (1.0 - TIE_EPSILON) {
-                    // Clearly nearer than everything so far.
-                    (best.t, best.obj, best.instance, best.tri) = (t, obj, ii, i);
-                } else if obj < best.obj || (obj == best.obj && t < best.t) {
-                    // A tie with the best (t was accepted, so t ≤ best.t·(1+ε)): lower id wins.
-                    (best.t, best.obj, best.instance, best.tri) = (t.min(best.t), obj, ii, i);
-                }
-                // Keep accepting hits inside the tie window behind this one.
-                let bound = t * (1.0 + TIE_EPSILON);
-                best.tmax = best.tmax.min(bound);
-                bound
+                window.bound
             });
-            // Instance boxes beyond the tie window of the best hit cannot change the result.
-            best.tmax
+            // Instance boxes beyond the tie window of the nearest hit cannot change the result.
+            window.bound
         });
-        if best.obj == NO_OBJECT {
-            return NO_OBJECT;
+        window.id()
+    }
+
+    /// The ray of `inst`'s BLAS: the world ray, or carried into model space by the inverse
+    /// transform (direction not normalised, so `t` is the same in both spaces).
+    #[inline(always)]
+    fn instance_ray(&self, inst: &Instance, o: Vec3A, d: Vec3A, tmax: f32) -> Ray {
+        match &inst.to_model {
+            None => Ray::new(o, d, self.near, tmax),
+            Some(m) => Ray::new(m.transform_point3a(o), m.transform_vector3a(d), self.near, tmax),
         }
-        // The back-face test in the hit triangle's own space: with n = e1×e2 in model space and
-        // M the linear part of the transform, the world normal of the (winding-corrected) world
-        // triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
-        let inst = &self.instances[best.instance];
-        let dir = inst.to_model.map_or(d, |m| m.transform_vector3a(d));
-        let tri = &self.blases[inst.blas as usize].triangles[best.tri];
-        let normal = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
-        if normal.dot(dir) > 0.0 { best.obj | BACK_FACE_BIT } else { best.obj }
+    }
+
+    /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
+    /// tested first, and its tie window bounds the traversal from the start, which then skips
+    /// every box behind it; a scene whose TLAS holds one instance (no instancing) goes straight to
+    /// its BLAS; triangles carry their precomputed edges. The id depends only on the set of hits
+    /// the BVH lets through inside the tie window, which every route finds whole, so it equals
+    /// `trace`'s. The bound is only trusted once the traversal itself reaches a hit at least as
+    /// near: a ray grazing a box edge can hit a triangle whose box test it fails (rounding), and
+    /// the reference would not see that hit; then the ray is traced again without the bound.
+    #[inline(always)]
+    fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
+        let window = &mut state.window;
+        window.clear();
+        let mut hint_t = f32::INFINITY;
+        if let Some((ii, i)) = state.last {
+            let inst = &self.instances[ii as usize];
+            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
+            hint_t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
+            window.bound = hint_t * (1.0 + TIE_EPSILON);
+        }
+        self.traverse_all::<WIDE>(o, d, window);
+        if window.t_near > hint_t {
+            window.clear();
+            self.traverse_all::<WIDE>(o, d, window);
+        }
+        // A miss keeps the last hit: the next ray may well hit it.
+        if let Some(h) = window.winner() {
+            state.last = Some((h.instance, h.tri));
+        }
+        window.id()
+    }
+
+    /// Adds to `window` the hits of every instance nearer than its bound.
+    #[inline(always)]
+    fn traverse_all<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        match &self.tlas {
+            None => {}
+            Some(_) if self.instances.len() == 1 => self.traverse_blas::<WIDE>(0, o, d, window),
+            Some(tlas) => {
+                let mut ray = Ray::new(o, d, self.near, window.bound);
+                let mut traversal = tlas.new_traversal(ray.direction);
+                let mut node;
+                obvhs::traverse!(tlas, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
+                    self.traverse_blas::<WIDE>(traversal.primitive_id as usize, o, d, window);
+                    ray.tmax = window.bound;
+                });
+            }
+        }
+    }
+
+    /// Adds to `window` the hits of instance `ii`'s BLAS nearer than its bound.
+    #[inline(always)]
+    fn traverse_blas<const WIDE: bool>(&self, ii: usize, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        let inst = &self.instances[ii];
+        let blas = &self.blases[inst.blas as usize];
+        let mut ray = self.instance_ray(inst, o, d, window.bound);
+        let mut traversal = blas.bvh.new_traversal(ray.direction);
+        let mut node;
+        obvhs::traverse!(blas.bvh, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
+            let i = traversal.primitive_id as usize;
+            let t = blas.triangles[i].intersect(&ray);
+            if t.is_finite() {
+                window.add(blas.hit(inst, ii, i, t, &ray));
+                ray.tmax = window.bound;
+            }
+        });
+    }
+
+    /// The id cube from `p` by [`CpuBackend::trace`], one ray after another on the calling thread:
+    /// the straightforward tracer that [`DovBackend::render_ids`] must equal texel for texel
+    /// (tests), and the "before" of the per-ray speed figures (tools/src/bin/ray-speed.rs).
+    pub fn render_ids_reference(&self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        check_point(p)?;
+        check_cube(out, self.cube.resolution())?;
+        let r = self.cube.resolution();
+        let mut ids = out.ids.iter_mut();
+        for face in 0..cubemap::FACE_COUNT {
+            for row in 0..r {
+                for col in 0..r {
+                    *ids.next().expect("checked length") = self.trace(p, self.cube.texel_direction(face, row, col));
+                }
+            }
+        }
+        Ok(())
     }
 }
 
@@ -247,15 +448,127 @@ impl DovBackend for CpuBackend {
         check_cube(out, self.cube.resolution())?;
         let r = self.cube.resolution() as usize;
         let this = &*self;
-        // One rayon task per texel row: rows are long enough to amortise scheduling.
-        out.ids.par_chunks_mut(r).enumerate().for_each(|(face_row, ids)| {
-            let face = face_row / r;
-            let row = (face_row % r) as u32;
-            for (col, id) in ids.iter_mut().enumerate() {
-                *id = this.trace(p, this.cube.texel_direction(face, row, col as u32));
+        let o = Vec3A::from(p);
+        // One rayon task per band of TILE rows of a face, traced tile by tile: neighbouring rays
+        // share BVH nodes (in cache) and, mostly, their nearest triangle (tested first).
+        let bands = out.ids.par_chunks_mut(r * r).enumerate().flat_map(|(face, ids)| {
+            ids.par_chunks_mut(r * TILE).enumerate().map(move |(band, ids)| (face, band * TILE, ids))
+        });
+        let wide = self.wide;
+        bands.for_each_init(TexelState::default, |state, (face, row0, ids)| {
+            #[cfg(target_arch = "x86_64")]
+            if wide {
+                // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+                return unsafe { this.trace_band_wide(o, face, row0, ids, state) };
             }
+            this.trace_band::<false>(o, face, row0, ids, state);
         });
         Ok(())
+    }
+}
+
+/// The children of `node` that `ray` enters (obvhs's hit mask). `WIDE` (only inside
+/// [`CpuBackend::trace_band_wide`]) tests all eight children in one AVX2 pass, with the operations
+/// of obvhs's four-wide `intersect_ray_simd` lane by lane (the same products, sums, min/max and
+/// `≤`), so the same children are entered; obvhs converts the quantised bounds one byte at a
+/// time, the costliest part of its test, which AVX2 does in one instruction.
+#[inline(always)]
+fn intersect_node<const WIDE: bool>(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: WIDE is only instantiated under `trace_band_wide`, whose CPU has AVX2.
+        return unsafe { intersect_node_avx2(node, ray, oct_inv4) };
+    }
+    node.intersect_ray(ray, oct_inv4)
+}
+
+/// obvhs's lower bound on a child's entry distance (its private `EPSILON`).
+const NODE_TMIN: f32 = 0.0001;
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn intersect_node_avx2(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    use std::arch::x86_64::*;
+    let adj_dir = node.compute_extent() * ray.inv_direction;
+    let adj_origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    // SAFETY (all intrinsics): AVX2 is present (see `intersect_node`); each load reads 8 bytes.
+    unsafe {
+        let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(b.as_ptr().cast())));
+        let slab = |lo: &[u8; 8], hi: &[u8; 8], negative: bool, dir: f32, origin: f32| {
+            let (lo, hi) = (q(lo), q(hi));
+            let (near, far) = if negative { (hi, lo) } else { (lo, hi) };
+            let (dir, origin) = (_mm256_set1_ps(dir), _mm256_set1_ps(origin));
+            (_mm256_add_ps(_mm256_mul_ps(near, dir), origin), _mm256_add_ps(_mm256_mul_ps(far, dir), origin))
+        };
+        let d = ray.direction;
+        let (tmin_x, tmax_x) = slab(&node.child_min_x, &node.child_max_x, d.x < 0.0, adj_dir.x, adj_origin.x);
+        let (tmin_y, tmax_y) = slab(&node.child_min_y, &node.child_max_y, d.y < 0.0, adj_dir.y, adj_origin.y);
+        let (tmin_z, tmax_z) = slab(&node.child_min_z, &node.child_max_z, d.z < 0.0, adj_dir.z, adj_origin.z);
+        let tmin = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+        let tmax = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+        let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_TMIN));
+        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray.tmax));
+        let mut entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32;
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+        let mut hit_mask = 0u32;
+        while entered != 0 {
+            let slot = entered.trailing_zeros() as usize;
+            entered &= entered - 1;
+            hit_mask |= extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot);
+        }
+        hit_mask
+    }
+}
+
+/// Whether this CPU runs [`CpuBackend::trace_band_wide`] (x86-64 with AVX2, FMA, BMI1/2, LZCNT and
+/// POPCNT: every x86-64 since 2013).
+fn wide_instructions() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+impl CpuBackend {
+    /// Traces the texels of `rows` rows (`ids.len() / R`) of `face` from `row0`, tile by tile.
+    #[inline(always)]
+    fn trace_band<const WIDE: bool>(
+        &self,
+        o: Vec3A,
+        face: usize,
+        row0: usize,
+        ids: &mut [u32],
+        state: &mut TexelState,
+    ) {
+        let r = self.cube.resolution() as usize;
+        state.last = None;
+        let rows = ids.len() / r;
+        for col0 in (0..r).step_by(TILE) {
+            let col1 = (col0 + TILE).min(r);
+            for dr in 0..rows {
+                for col in col0..col1 {
+                    let d = self.cube.texel_direction(face, (row0 + dr) as u32, col as u32);
+                    ids[dr * r + col] = self.trace_fast::<WIDE>(o, Vec3A::from(d), state);
+                }
+            }
+        }
+    }
+
+    /// [`CpuBackend::trace_band`] compiled for newer x86-64 CPUs, as Embree picks its kernels at
+    /// run time. The traversal counts and finds bits per node (one instruction each with POPCNT and
+    /// LZCNT, a dozen without); the arithmetic is the same operations (Rust never fuses a
+    /// multiply-add by itself), so the ids are bit-identical (tests/dov_fast_path.rs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn trace_band_wide(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+        self.trace_band::<true>(o, face, row0, ids, state)
     }
 }
 
@@ -280,8 +593,17 @@ fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
     if tris.is_empty() {
         return None;
     }
-    let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-    let triangles = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
+    // Pre-split builds: per ray, the slow preset took 33 % less time than the medium one on the
+    // default city and the very slow one 19 % less on the 110 k-triangle engine (the slow one
+    // 15 %), but the very slow build took 6.5× the medium one on the city's 2.2 M triangles
+    // (the slow 2.5×): the very slow one only where it stays cheap (docs/decisions.md, 42).
+    let params = if tris.len() <= VERY_SLOW_BUILD_MAX_TRIANGLES {
+        BvhBuildParams::very_slow_build()
+    } else {
+        BvhBuildParams::slow_build()
+    };
+    let bvh = build_cwbvh_from_tris(&tris, params, &mut Duration::default());
+    let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
     let objects =
         if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
     Some(Blas { bvh, triangles, objects })
@@ -364,4 +686,65 @@ pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn vec3a() -> impl Strategy<Value = Vec3A> {
+        // Small integers make degenerate, edge-on and exactly-on-edge cases common.
+        prop_oneof![
+            [-4.0f32..4.0, -4.0..4.0, -4.0..4.0].prop_map(Vec3A::from),
+            [-2i8..3, -2..3, -2..3].prop_map(|v| Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32)),
+        ]
+    }
+
+    proptest! {
+        /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may
+        /// then differ in nothing but the order in which they meet triangles.
+        #[test]
+        fn ray_triangle_is_obvhs_triangle_bit_for_bit(
+            v in [vec3a(), vec3a(), vec3a()], o in vec3a(), d in vec3a(), tmin in 0.0f32..0.5, tmax in 0.5f32..20.0,
+        ) {
+            let tri = Triangle { v0: v[0], v1: v[1], v2: v[2] };
+            let ray = Ray { origin: o, direction: d, inv_direction: d.recip(), tmin, tmax };
+            prop_assert_eq!(RayTriangle::new(&tri).intersect(&ray).to_bits(), tri.intersect(&ray).to_bits());
+            // The back-face sign: e1 × e2 is minus (v1 − v0) × (v2 − v0), exactly.
+            let ccw = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
+            prop_assert_eq!(RayTriangle::new(&tri).seen_from_behind(d), ccw.dot(d) > 0.0);
+        }
+
+        /// The tie window's id does not depend on the order hits arrive in (as long as each is
+        /// within the bound at its arrival, as a traversal guarantees).
+        #[test]
+        fn tie_window_id_ignores_hit_order(
+            hits in prop::collection::vec((0u32..4, 0u32..6, any::<bool>()), 1..12), seed in any::<u64>(),
+        ) {
+            // t values 1 + k·4e-6: neighbours tie, the far ones chain beyond one window.
+            let hits: Vec<Hit> = hits
+                .iter()
+                .enumerate()
+                .map(|(i, &(k, obj, back))| Hit { t: 1.0 + k as f32 * 4e-6, obj, back, instance: 0, tri: i as u32 })
+                .collect();
+            let id = |order: &[Hit]| {
+                let mut w = TieWindow::default();
+                w.clear();
+                for h in order {
+                    if h.t <= w.bound {
+                        w.add(*h);
+                    }
+                }
+                w.id()
+            };
+            let mut shuffled = hits.clone();
+            let mut s = seed;
+            for i in (1..shuffled.len()).rev() {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                shuffled.swap(i, (s >> 33) as usize % (i + 1));
+            }
+            prop_assert_eq!(id(&hits), id(&shuffled));
+        }
+    }
 }

@@ -1,0 +1,109 @@
+//! Per-ray speed of the CPU backend on one thread, and the files Embree needs to cast the very same
+//! rays (tools/embree/embree_ray_speed.py; tools/embree/ray_speed.sh runs both).
+//!
+//! Sample points: the corners of an X × Y × Z cell grid over the region a build would use
+//! (`ViewGrid::resolve`, default 8 × 1 × 8 = 162 corners). At each point, on this one thread:
+//! `render_ids_reference` (one `trace` per texel: the straightforward tracer) and `render_ids` (the
+//! fast path, in a 1-thread rayon pool); the two id cubes must be equal. Times are the process's
+//! CPU time (one thread busy at a time), steadier than the wall clock on a shared machine.
+//!
+//! Writes into OUT_DIR: `triangles.f32` (world triangles, 9 f32 each, the order of
+//! `world_triangles`), `objects.u32` (each triangle's object), `points.f32` (3 f32 per point),
+//! `directions.f32` (the 6·R² texel-centre directions, face by face, row by row), `ids.u32` (the
+//! fast path's id cube per point) and `hdov.json` (resolution, near, timings).
+//!
+//! `cargo run --release -p hdov-tools --bin ray-speed -- SCENE OUT_DIR [R] [X,Y,Z]`
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use hdov::dov::{CpuBackend, DovBackend, IdCube, cubemap};
+use hdov::grid::ViewGrid;
+use hdov::scene::Scene;
+use hdov_tools::process_cpu_time;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let usage = "usage: ray-speed SCENE OUT_DIR [RESOLUTION] [X,Y,Z]";
+    let mut args = std::env::args().skip(1);
+    let scene_path = args.next().ok_or(usage)?;
+    let out_dir = std::path::PathBuf::from(args.next().ok_or(usage)?);
+    let r: u32 = args.next().map(|s| s.parse()).transpose().map_err(|e| format!("resolution: {e}"))?.unwrap_or(256);
+    let dims: Vec<u32> = args
+        .next()
+        .unwrap_or_else(|| "8,1,8".into())
+        .split(',')
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("grid: {e}"))?;
+    let dims: [u32; 3] = dims.try_into().map_err(|_| "grid: expected X,Y,Z")?;
+    println!("{}", hdov_tools::machine());
+
+    let (scene, _) = Scene::load(std::path::Path::new(&scene_path))?;
+    let grid = ViewGrid::resolve(scene.bounds(), scene.grid, None, Some(dims), None)?;
+    let points: Vec<Vec3> = (0..grid.corner_count()).map(|i| grid.corner_position(grid.corner_coords(i))).collect();
+    let t0 = Instant::now();
+    let mut backend = CpuBackend::new(&scene, r)?;
+    println!("{}: BVH build {:.2?}, {} sample points at R = {r}", backend.name(), t0.elapsed(), points.len());
+
+    std::fs::create_dir_all(&out_dir)?;
+    let (triangles, objects) = hdov::dov::cpu::world_triangles(&scene)?;
+    write_f32(&out_dir.join("triangles.f32"), triangles.iter().flatten().flat_map(|v| v.to_array()))?;
+    std::fs::write(out_dir.join("objects.u32"), objects.iter().flat_map(|o| o.to_le_bytes()).collect::<Vec<_>>())?;
+    write_f32(&out_dir.join("points.f32"), points.iter().flat_map(|p| p.to_array()))?;
+    let cube = backend.cube_map().clone();
+    let directions = (0..cubemap::FACE_COUNT)
+        .flat_map(|f| (0..r).flat_map(move |row| (0..r).map(move |col| (f, row, col))))
+        .flat_map(|(f, row, col)| cube.texel_direction(f, row, col).to_array());
+    write_f32(&out_dir.join("directions.f32"), directions)?;
+
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut ids_file = std::io::BufWriter::new(std::fs::File::create(out_dir.join("ids.u32"))?);
+    let (mut reference, mut fast) = (IdCube::new(r), IdCube::new(r));
+    // CPU time of this process (the one busy thread), and wall time beside it.
+    let (mut t_reference, mut t_fast) = (Duration::ZERO, Duration::ZERO);
+    let (mut wall_reference, mut wall_fast) = (Duration::ZERO, Duration::ZERO);
+    let mut differing = 0usize;
+    for &p in &points {
+        let (t, c) = (Instant::now(), process_cpu_time());
+        backend.render_ids_reference(p, &mut reference)?;
+        (wall_reference, t_reference) = (wall_reference + t.elapsed(), t_reference + (process_cpu_time() - c));
+        let (t, c) = (Instant::now(), process_cpu_time());
+        pool.install(|| backend.render_ids(p, &mut fast))?;
+        (wall_fast, t_fast) = (wall_fast + t.elapsed(), t_fast + (process_cpu_time() - c));
+        differing += reference.ids.iter().zip(&fast.ids).filter(|(a, b)| a != b).count();
+        ids_file.write_all(&fast.ids.iter().flat_map(|id| id.to_le_bytes()).collect::<Vec<_>>())?;
+    }
+    ids_file.flush()?;
+
+    let n = points.len() as f64;
+    let rays = 6.0 * f64::from(r) * f64::from(r);
+    let ms = |d: Duration| d.as_secs_f64() * 1e3 / n;
+    let (ms_reference, ms_fast) = (ms(t_reference), ms(t_fast));
+    let speed = |label: &str, cpu_ms: f64, wall: Duration| {
+        let wall_ms = ms(wall);
+        println!(
+            "{label}: {cpu_ms:.2} ms CPU per point, {:.2} M rays/s per thread (wall {wall_ms:.2} ms)",
+            rays / cpu_ms / 1e3
+        );
+    };
+    speed("reference tracer", ms_reference, wall_reference);
+    speed("fast render_ids ", ms_fast, wall_fast);
+    println!("texels differing between the two: {differing} of {}", rays as usize * points.len());
+    let json = format!(
+        "{{\"resolution\": {r}, \"near\": {}, \"points\": {}, \"triangles\": {}, \"ms_per_point_reference\": {ms_reference}, \
+         \"ms_per_point_fast\": {ms_fast}, \"texels_differing\": {differing}}}\n",
+        backend.near(),
+        points.len(),
+        triangles.len()
+    );
+    std::fs::write(out_dir.join("hdov.json"), json)?;
+    if differing > 0 {
+        return Err(format!("the fast path differs from the reference tracer in {differing} texels").into());
+    }
+    Ok(())
+}
+
+fn write_f32(path: &std::path::Path, values: impl Iterator<Item = f32>) -> std::io::Result<()> {
+    std::fs::write(path, values.flat_map(f32::to_le_bytes).collect::<Vec<_>>())
+}
