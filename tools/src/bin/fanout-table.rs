@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::BackendKind;
 use hdov::progress::Progress;
-use hdov::{BuildParams, Database, Mode, QueryParams, VisibilityParams};
+use hdov::{BuildParams, Database, LodRule, Mode, QueryParams, VisibilityParams};
 
 const FANOUTS: [u32; 5] = [4, 8, 16, 32, 126];
 const ETAS: [f64; 4] = [0.0, 1e-4, 1e-3, 8e-3];
@@ -70,9 +70,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             Ok((faces / n, pages / n, nodes / n))
         };
-        let naive = mean(&QueryParams { mode: Mode::Naive, ..Default::default() })?;
-        let per_eta: Vec<_> =
-            ETAS.iter().map(|&eta| mean(&QueryParams { eta, ..Default::default() })).collect::<Result<_, _>>()?;
+        let naive = mean(&QueryParams { mode: Mode::Naive, lod_rule: LodRule::Dov, ..Default::default() })?;
+        let per_eta: Vec<_> = ETAS
+            .iter()
+            .map(|&eta| mean(&QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() }))
+            .collect::<Result<_, _>>()?;
         let bytes = ["horizontal", "vertical", "indexed-vertical"].map(|k| info.layouts.get(k).map_or(0, |l| l.bytes));
         let (nodes, height) = (info.nodes, info.tree.height);
         println!(

@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use hdov::grid::ViewGrid;
-use hdov::{QueryParams, SessionParams};
+use hdov::{LodRule, QueryParams, SessionParams};
 use hdov_storage::PolicyKind;
 
 use super::charts::{Panel, Series};
@@ -40,7 +40,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
                 let mut points = Vec::new();
                 for pages in CACHE_PAGES {
                     let params = SessionParams {
-                        query: QueryParams { eta, ..Default::default() },
+                        query: QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() },
                         cache: policy,
                         cache_pages: Some(pages),
                         ..Default::default()

@@ -57,12 +57,19 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
     let bar = ctx.bar("query vs η", layouts.len() * (ETAS.len() + 1));
     let (mut pages, mut micros, mut heavy, mut faces) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for &layout in &layouts {
-        let naive =
-            mean_costs(&db, &centres, &QueryParams { mode: Mode::Naive, layout: Some(layout), ..Default::default() })?;
+        let naive = mean_costs(
+            &db,
+            &centres,
+            &QueryParams { mode: Mode::Naive, layout: Some(layout), lod_rule: LodRule::Dov, ..Default::default() },
+        )?;
         bar.inc(1);
         let mut rows = Vec::new();
         for eta in ETAS {
-            let m = mean_costs(&db, &centres, &QueryParams { eta, layout: Some(layout), ..Default::default() })?;
+            let m = mean_costs(
+                &db,
+                &centres,
+                &QueryParams { eta, layout: Some(layout), lod_rule: LodRule::Dov, ..Default::default() },
+            )?;
             rows.push((eta, m));
             bar.inc(1);
         }

@@ -2,7 +2,7 @@
 //! of at least four sizes (up to the large city at scale default and large).
 
 use hdov::city::CityScale;
-use hdov::{Mode, QueryParams};
+use hdov::{LodRule, Mode, QueryParams};
 use hdov_storage::DovCodec;
 
 use super::charts::{Panel, Series};
@@ -47,8 +47,15 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         let db_bytes: u64 = info.files.iter().map(|f| f.bytes).sum();
         let centres = db.grid().ok_or("the database holds no grid")?.cell_centres();
         mean_costs(&db, &centres, &QueryParams::default())?;
-        let runs = std::iter::once(("naive", 0.0, QueryParams { mode: Mode::Naive, ..Default::default() }))
-            .chain(ETAS.iter().map(|&eta| ("threshold", eta, QueryParams { eta, ..Default::default() })));
+        let runs = std::iter::once((
+            "naive",
+            0.0,
+            QueryParams { mode: Mode::Naive, lod_rule: LodRule::Dov, ..Default::default() },
+        ))
+        .chain(
+            ETAS.iter()
+                .map(|&eta| ("threshold", eta, QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() })),
+        );
         for (i, (query, eta, params)) in runs.enumerate() {
             let mut us = Vec::with_capacity(centres.len());
             let (mut faces, mut read) = (0u64, 0u64);

@@ -1,7 +1,7 @@
 //! Item 1, thesis table 5.2: bytes per layout and codec, per visible (node, cell) and per visible
 //! entry, against the tree's fan-out M.
 
-use hdov::{Mode, QueryParams};
+use hdov::{LodRule, Mode, QueryParams};
 use hdov_storage::DovCodec;
 
 use super::charts::{Panel, Series};
@@ -41,7 +41,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         // but the root (an internal entry). The naive query lists the cell's visible objects.
         let grid = *db.grid().ok_or("the database holds no grid")?;
         let centres = grid.cell_centres();
-        let naive = QueryParams { mode: Mode::Naive, ..Default::default() };
+        let naive = QueryParams { mode: Mode::Naive, lod_rule: LodRule::Dov, ..Default::default() };
         let mut objects = 0usize;
         for &at in &centres {
             objects += db.query(at, &naive).map_err(err)?.items.len();
