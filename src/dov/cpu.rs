@@ -34,7 +34,7 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
-use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, MAX_OBJECT_ID, NO_OBJECT, cubemap};
+use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_count, cubemap};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -633,16 +633,6 @@ fn inverse_affine(m: &glam::Mat4) -> Option<Affine3A> {
 fn padded(b: crate::geom::Aabb) -> BvhAabb {
     let pad = b.extent().max_element() * 1e-5 + b.min.abs().max(b.max.abs()).max_element() * 1e-6 + 1e-6;
     BvhAabb::new(Vec3A::from(b.min - Vec3::splat(pad)), Vec3A::from(b.max + Vec3::splat(pad)))
-}
-
-fn check_object_count(scene: &Scene) -> Result<()> {
-    if scene.objects.len() > MAX_OBJECT_ID as usize {
-        return Err(Error::bad_param(
-            "scene",
-            format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
-        ));
-    }
-    Ok(())
 }
 
 /// Every triangle of every object in world space, objects in index order, with its object index.

@@ -34,7 +34,7 @@ use wgpu::util::DrawIndexedIndirectArgs;
 
 use super::cpu::{check_cube, check_point, check_resolution_and_near};
 use super::cubemap::{FACE_COUNT, face_basis};
-use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, MAX_OBJECT_ID};
+use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube};
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, max_scale};
 use crate::gfx::Gpu;
@@ -206,12 +206,7 @@ impl GpuBackend {
                 format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
             ));
         }
-        if scene.objects.len() > MAX_OBJECT_ID as usize {
-            return Err(Error::bad_param(
-                "scene",
-                format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
-            ));
-        }
+        super::check_object_count(scene)?;
         let gpu = Gpu::open("hdov dov")?;
         let limit = gpu.limits.max_texture_dimension_2d;
         if resolution > limit {

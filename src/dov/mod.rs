@@ -32,6 +32,17 @@ pub const BACK_FACE_BIT: u32 = 1 << 31;
 /// Largest object index an id cube can carry (the top bit is [`BACK_FACE_BIT`]).
 pub const MAX_OBJECT_ID: u32 = BACK_FACE_BIT - 2;
 
+/// Refuses a scene with more objects than an id cube can name (both backends check it).
+pub fn check_object_count(scene: &crate::scene::Scene) -> crate::error::Result<()> {
+    if scene.objects.len() > MAX_OBJECT_ID as usize {
+        return Err(crate::error::Error::bad_param(
+            "scene",
+            format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
+        ));
+    }
+    Ok(())
+}
+
 /// The per-texel result of one cube-map rendering: 6·R² ids, face-major, then rows top to
 /// bottom, then columns left to right (the layout of [`cubemap`]). Each id is an object index,
 /// possibly with [`BACK_FACE_BIT`] set, or [`NO_OBJECT`].
