@@ -438,7 +438,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
     } else {
         println!(
-            "demo finished in {:.1} s; next: hdov query {} --at X,Y,Z, hdov walk {} --path FILE",
+            "demo finished in {:.1} s; next: hdov query {} --at X,Y,Z, hdov walk {} --walk turning --fidelity",
             t.elapsed().as_secs_f64(),
             db_path.display(),
             db_path.display()
