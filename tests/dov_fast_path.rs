@@ -1,6 +1,7 @@
 //! The CPU backend's fast path (`render_ids`: tiles, previous-hit bound, direct BLAS) against the
 //! reference tracer (`render_ids_reference`: one plain obvhs traversal per texel): the same id
-//! cube, texel for texel, on random small scenes built to hit the hard cases — boxes on a coarse
+//! cube, texel for texel — except where a ray meets two surfaces at its nearest depth up to
+//! rounding and both answers are among them — on random small scenes built to hit the hard cases — boxes on a coarse
 //! integer lattice (shared and coplanar faces between objects), exact duplicates (ties at equal
 //! t), instances of one mesh next to world-space copies, a flattened (two-sided, singular) box,
 //! and viewpoints on faces or within the near distance of them.
@@ -70,8 +71,14 @@ fn viewpoint() -> impl Strategy<Value = (Vec3, f32)> {
     })
 }
 
+/// The direction of texel `i` of the backend's id cube (faces, rows, columns in cube order).
+fn texel_direction(backend: &CpuBackend, i: usize) -> Vec3 {
+    let r = backend.resolution() as usize;
+    backend.cube_map().texel_direction(i / (r * r), ((i / r) % r) as u32, (i % r) as u32)
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 160, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 1000, ..ProptestConfig::default() })]
 
     #[test]
     fn fast_path_equals_reference_tracer(
@@ -87,7 +94,15 @@ proptest! {
             backend.set_wide_instructions(wide);
             let mut fast = IdCube::new(r);
             backend.render_ids(p, &mut fast).unwrap();
-            let differing: Vec<usize> = (0..fast.ids.len()).filter(|&i| fast.ids[i] != reference.ids[i]).collect();
+            // Equal ids, except where surfaces tie up to rounding (a viewpoint within `near` of
+            // coplanar faces): there both answers must be among the tied surfaces.
+            let differing: Vec<usize> = (0..fast.ids.len())
+                .filter(|&i| fast.ids[i] != reference.ids[i])
+                .filter(|&i| {
+                    let tied = backend.surfaces_at_nearest(p, texel_direction(&backend, i));
+                    !(tied.len() >= 2 && tied.contains(&fast.ids[i]) && tied.contains(&reference.ids[i]))
+                })
+                .collect();
             prop_assert!(differing.is_empty(), "wide {wide}: {} texels differ, first at {:?}", differing.len(), differing.first());
         }
     }

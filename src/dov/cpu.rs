@@ -41,6 +41,9 @@ use crate::scene::Scene;
 /// Two hits whose ray parameters differ by less than this fraction are a tie; the lower object id
 /// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
+/// Relative depth within which two surfaces are a tie up to `f32` rounding of rays that start
+/// within about `near` of them (tests of the fast path, [`CpuBackend::surfaces_at_nearest`]).
+pub const AMBIGUOUS_DEPTH: f32 = 1e-3;
 
 /// The largest BLAS built with obvhs's very slow preset; bigger ones get the slow preset.
 const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;
@@ -48,10 +51,12 @@ const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;
 /// Texels per side of the square tiles the fast path traces one after another.
 const TILE: usize = 8;
 
-/// What the fast path reuses from one texel to the next on one thread.
+/// What the fast path carries from one texel to the next on one thread.
 #[derive(Default)]
 struct TexelState {
     window: TieWindow,
+    /// The previous texel's winning hit: instance and triangle.
+    last: Option<(u32, u32)>,
 }
 
 /// One bottom-level BVH and its triangles in the BVH's primitive order (no indirection while
@@ -79,10 +84,10 @@ impl Blas {
     /// and M the linear part of the transform, the world normal of the (winding-corrected) world
     /// triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
     #[inline(always)]
-    fn hit(&self, inst: &Instance, i: usize, t: f32, ray: &Ray) -> Hit {
+    fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
         let obj = if inst.object == NO_OBJECT { self.objects[i] } else { inst.object };
         let back = self.triangles[i].seen_from_behind(ray.direction);
-        Hit { t, obj, back }
+        Hit { t, obj, back, instance: ii as u32, tri: i as u32 }
     }
 }
 
@@ -140,6 +145,9 @@ struct Hit {
     t: f32,
     obj: u32,
     back: bool,
+    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
+    instance: u32,
+    tri: u32,
 }
 
 /// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
@@ -319,7 +327,7 @@ impl CpuBackend {
             blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
                 let t = blas.triangles[i].intersect(ray);
                 if t.is_finite() {
-                    window.add(blas.hit(inst, i, t, ray));
+                    window.add(blas.hit(inst, ii, i, t, ray));
                 }
                 window.bound
             });
@@ -327,6 +335,38 @@ impl CpuBackend {
             window.bound
         });
         window.id()
+    }
+
+    /// The ids (with [`BACK_FACE_BIT`]) of the surfaces the ray from `origin` along `dir` meets
+    /// within [`AMBIGUOUS_DEPTH`] of its nearest hit, each once. Where there are two or more, the
+    /// ray's id depends on `f32` rounding of rays that start within about `near` of a tie, and
+    /// the fast path's early culling may pick another of them than the reference tracer (tests).
+    pub fn surfaces_at_nearest(&self, origin: Vec3, dir: Vec3) -> Vec<u32> {
+        let Some(tlas) = &self.tlas else { return Vec::new() };
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let mut hits: Vec<Hit> = Vec::new();
+        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
+            let inst = &self.instances[ii];
+            let blas = &self.blases[inst.blas as usize];
+            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
+            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
+                let t = blas.triangles[i].intersect(ray);
+                if t.is_finite() {
+                    hits.push(blas.hit(inst, ii, i, t, ray));
+                }
+                f32::INFINITY
+            });
+            f32::INFINITY
+        });
+        let nearest = hits.iter().map(|h| h.t).fold(f32::INFINITY, f32::min);
+        let mut ids: Vec<u32> = hits
+            .iter()
+            .filter(|h| h.t <= nearest * (1.0 + AMBIGUOUS_DEPTH))
+            .map(|h| if h.back { h.obj | BACK_FACE_BIT } else { h.obj })
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
     }
 
     /// The ray of `inst`'s BLAS: the world ray, or carried into model space by the inverse
@@ -339,17 +379,34 @@ impl CpuBackend {
         }
     }
 
-    /// [`CpuBackend::trace`]'s id by a faster route: a scene whose TLAS holds one instance (no
-    /// instancing) goes straight to its BLAS, and triangles carry their precomputed edges. The id
-    /// depends only on the set of hits the BVH lets through inside the tie window, which every
-    /// route finds whole, so it equals `trace`'s. (A bound from the previous texel's winning
-    /// triangle, tested first, was tried and removed: on a viewpoint 0.001 below two coplanar
-    /// faces it changed ids — decision 41's note.)
+    /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
+    /// tested first, and its tie window bounds the traversal from the start, which then skips
+    /// every box behind it; a scene whose TLAS holds one instance (no instancing) goes straight to
+    /// its BLAS; triangles carry their precomputed edges. The id depends only on the set of hits
+    /// the BVH lets through inside the tie window, which every route finds whole, so it equals
+    /// `trace`'s. The bound is only trusted once the traversal itself reaches a hit at least as
+    /// near: a ray grazing a box edge can hit a triangle whose box test it fails (rounding), and
+    /// the reference would not see that hit; then the ray is traced again without the bound.
     #[inline(always)]
     fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
         let window = &mut state.window;
         window.clear();
+        let mut hint_t = f32::INFINITY;
+        if let Some((ii, i)) = state.last {
+            let inst = &self.instances[ii as usize];
+            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
+            hint_t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
+            window.bound = hint_t * (1.0 + TIE_EPSILON);
+        }
         self.traverse_all::<WIDE>(o, d, window);
+        if window.t_near > hint_t {
+            window.clear();
+            self.traverse_all::<WIDE>(o, d, window);
+        }
+        // A miss keeps the last hit: the next ray may well hit it.
+        if let Some(h) = window.winner() {
+            state.last = Some((h.instance, h.tri));
+        }
         window.id()
     }
 
@@ -383,7 +440,7 @@ impl CpuBackend {
             let i = traversal.primitive_id as usize;
             let t = blas.triangles[i].intersect(&ray);
             if t.is_finite() {
-                window.add(blas.hit(inst, i, t, &ray));
+                window.add(blas.hit(inst, ii, i, t, &ray));
                 ray.tmax = window.bound;
             }
         });
@@ -526,6 +583,7 @@ impl CpuBackend {
         state: &mut TexelState,
     ) {
         let r = self.cube.resolution() as usize;
+        state.last = None;
         let rows = ids.len() / r;
         for col0 in (0..r).step_by(TILE) {
             let col1 = (col0 + TILE).min(r);
@@ -690,7 +748,11 @@ mod tests {
             hits in prop::collection::vec((0u32..4, 0u32..6, any::<bool>()), 1..12), seed in any::<u64>(),
         ) {
             // t values 1 + k·4e-6: neighbours tie, the far ones chain beyond one window.
-            let hits: Vec<Hit> = hits.iter().map(|&(k, obj, back)| Hit { t: 1.0 + k as f32 * 4e-6, obj, back }).collect();
+            let hits: Vec<Hit> = hits
+                .iter()
+                .enumerate()
+                .map(|(i, &(k, obj, back))| Hit { t: 1.0 + k as f32 * 4e-6, obj, back, instance: 0, tri: i as u32 })
+                .collect();
             let id = |order: &[Hit]| {
                 let mut w = TieWindow::default();
                 w.clear();

@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // CPU time of this process (the one busy thread), and wall time beside it.
     let (mut t_reference, mut t_fast) = (Duration::ZERO, Duration::ZERO);
     let (mut wall_reference, mut wall_fast) = (Duration::ZERO, Duration::ZERO);
-    let mut differing = 0usize;
+    let (mut differing, mut ties) = (0usize, 0usize);
     for &p in &points {
         let (t, c) = (Instant::now(), process_cpu_time());
         backend.render_ids_reference(p, &mut reference)?;
@@ -71,7 +71,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (t, c) = (Instant::now(), process_cpu_time());
         pool.install(|| backend.render_ids(p, &mut fast))?;
         (wall_fast, t_fast) = (wall_fast + t.elapsed(), t_fast + (process_cpu_time() - c));
-        differing += reference.ids.iter().zip(&fast.ids).filter(|(a, b)| a != b).count();
+        // A difference is allowed only on a tie up to rounding: both ids among the surfaces at
+        // the nearest depth (`CpuBackend::surfaces_at_nearest`).
+        for (i, (a, b)) in reference.ids.iter().zip(&fast.ids).enumerate().filter(|(_, (a, b))| a != b) {
+            let (f, row, col) = (i / (r * r) as usize, (i / r as usize) % r as usize, i % r as usize);
+            let tied = backend.surfaces_at_nearest(p, cube.texel_direction(f, row as u32, col as u32));
+            if tied.len() >= 2 && tied.contains(a) && tied.contains(b) {
+                ties += 1;
+            } else {
+                differing += 1;
+            }
+        }
         ids_file.write_all(&fast.ids.iter().flat_map(|id| id.to_le_bytes()).collect::<Vec<_>>())?;
     }
     ids_file.flush()?;
@@ -89,7 +99,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     speed("reference tracer", ms_reference, wall_reference);
     speed("fast render_ids ", ms_fast, wall_fast);
-    println!("texels differing between the two: {differing} of {}", rays as usize * points.len());
+    println!(
+        "texels differing between the two: {differing} of {} (and {ties} ties up to rounding, answered by another of the tied surfaces)",
+        rays as usize * points.len()
+    );
     let json = format!(
         "{{\"resolution\": {r}, \"near\": {}, \"points\": {}, \"triangles\": {}, \"ms_per_point_reference\": {ms_reference}, \
          \"ms_per_point_fast\": {ms_fast}, \"texels_differing\": {differing}}}\n",
