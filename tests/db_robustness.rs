@@ -23,6 +23,7 @@ use hdov::grid::ViewGrid;
 use hdov::progress::Progress;
 use hdov::scene::{Mesh, Scene};
 use hdov::{BuildParams, Database, Info, VisibilityParams};
+use hdov_storage::blob::reseal_checksums as reseal_blob_checksums;
 use hdov_storage::blob::{BLOB_HEADER_LEN, RECORD_HEADER_LEN};
 use hdov_storage::mutation::{Rng, mutate};
 use hdov_storage::pagefile::reseal_checksums as reseal_page_checksums;
@@ -146,24 +147,6 @@ fn fixture() -> Fixture {
 
 fn layout_files() -> Vec<&'static str> {
     LayoutKind::ALL.iter().flat_map(|k| k.file_names().iter().copied()).collect()
-}
-
-/// Recomputes the blob header's crc32 and that of every record whose bytes lie in the file.
-fn reseal_blob_checksums(b: &mut [u8]) {
-    if b.len() < BLOB_HEADER_LEN {
-        return;
-    }
-    let crc = crc32fast::hash(&b[0..28]);
-    b[28..32].copy_from_slice(&crc.to_le_bytes());
-    let mut at = BLOB_HEADER_LEN;
-    while at + RECORD_HEADER_LEN <= b.len() {
-        let len = u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize;
-        let data = at + RECORD_HEADER_LEN;
-        let Some(end) = data.checked_add(len).filter(|&e| e <= b.len()) else { break };
-        let crc = crc32fast::hash(&b[data..end]);
-        b[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
-        at = end;
-    }
 }
 
 /// What one damaged database gave.

@@ -225,3 +225,23 @@ impl BlobFile {
         })
     }
 }
+
+/// Recomputes the header checksum and that of every record whose bytes lie in a blob-file
+/// image in memory, so that a mutated payload reaches the decoders behind the checksum check.
+/// For fault-injection tests and fuzzing only (the twin of `pagefile::reseal_checksums`).
+pub fn reseal_checksums(b: &mut [u8]) {
+    if b.len() < BLOB_HEADER_LEN {
+        return;
+    }
+    let crc = crc32fast::hash(&b[0..28]);
+    b[28..32].copy_from_slice(&crc.to_le_bytes());
+    let mut at = BLOB_HEADER_LEN;
+    while at + RECORD_HEADER_LEN <= b.len() {
+        let len = u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes")) as usize;
+        let data = at + RECORD_HEADER_LEN;
+        let Some(end) = data.checked_add(len).filter(|&e| e <= b.len()) else { break };
+        let crc = crc32fast::hash(&b[data..end]);
+        b[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
+        at = end;
+    }
+}
