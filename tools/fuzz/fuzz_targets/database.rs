@@ -81,7 +81,6 @@ fn read_all(dir: &Path) -> hdov::Result<()> {
     Ok(())
 }
 
-
 /// `manifest.json` with the size of `name` recorded as `bytes`.
 fn manifest_with_size(manifest: &[u8], name: &str, bytes: usize) -> Vec<u8> {
     let set = |list: &mut serde_json::Value| {
