@@ -15,28 +15,51 @@ use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
 use hdov_storage::{LayoutKind, PolicyKind};
 
-/// What both commands ask of each query.
+/// What a query returns: its mode, η, level rule and the modes' own bounds (`query`, `walk` and
+/// `render` alike).
 #[derive(Args)]
-pub struct QueryArgs {
+pub(super) struct AnswerArgs {
     /// DoV threshold η (threshold mode): subtrees seen with DoV ≤ η come back as one coarse LOD.
     #[arg(long, default_value_t = 1e-3)]
     eta: f64,
-    /// threshold, naive, budget, vmsse or frustum.
+    /// Query mode: threshold, naive, budget, vmsse or frustum.
     #[arg(long, default_value = "threshold")]
     mode: Mode,
-    /// V-page layout to read (default: indexed-vertical).
-    #[arg(long)]
-    layout: Option<LayoutKind>,
     /// Budget mode: faces to return at most.
     #[arg(long, default_value_t = 100_000)]
     budget: u64,
     /// Vmsse mode: screen-space error bound in pixels.
     #[arg(long, default_value_t = 1.0)]
     tau: f64,
-    /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
-    /// error is at most PIXELS, default 0.5, from anywhere in the cell) or `dov` (thesis eq. 5.6).
+    /// Levels of detail of threshold, naive and budget modes: `screen[:PIXELS]` (the coarsest
+    /// level whose error is at most PIXELS, default 0.5, from anywhere in the cell) or `dov`
+    /// (thesis eq. 5.6).
     #[arg(long, default_value = "screen:0.5")]
     lod_rule: LodRule,
+}
+
+impl AnswerArgs {
+    pub(super) fn params(&self, camera: Option<Camera>, layout: Option<LayoutKind>) -> QueryParams {
+        QueryParams {
+            mode: self.mode,
+            eta: self.eta,
+            budget: self.budget,
+            tau: self.tau,
+            lod_rule: self.lod_rule,
+            camera,
+            layout,
+        }
+    }
+}
+
+/// What `query` and `walk` ask of each query.
+#[derive(Args)]
+pub struct QueryArgs {
+    #[command(flatten)]
+    answer: AnswerArgs,
+    /// V-page layout to read (default: indexed-vertical).
+    #[arg(long)]
+    layout: Option<LayoutKind>,
     /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     look: Option<Vec3>,
@@ -53,15 +76,7 @@ impl QueryArgs {
     fn params(&self) -> QueryParams {
         let camera =
             Camera { fov_y_deg: self.fov.unwrap_or(60.0), image_height: self.image_height, ..Camera::default() };
-        QueryParams {
-            mode: self.mode,
-            eta: self.eta,
-            budget: self.budget,
-            tau: self.tau,
-            lod_rule: self.lod_rule,
-            camera: self.look.map(|look| Camera { look, ..camera }),
-            layout: self.layout,
-        }
+        self.answer.params(self.look.map(|look| Camera { look, ..camera }), self.layout)
     }
 }
 

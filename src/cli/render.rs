@@ -8,11 +8,10 @@ use glam::Vec3;
 use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
+use hdov::Database;
 use hdov::error::{Error, Result};
-use hdov::query::{LodRule, Mode};
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
-use hdov::{Database, QueryParams};
 
 #[derive(Args)]
 pub struct RenderCmd {
@@ -23,22 +22,8 @@ pub struct RenderCmd {
     /// View direction DX,DY,DZ (y up).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     look: Vec3,
-    /// DoV threshold η (threshold mode).
-    #[arg(long, default_value_t = 1e-3)]
-    eta: f64,
-    /// Query mode: threshold, naive, budget, vmsse or frustum.
-    #[arg(long, default_value = "threshold")]
-    mode: Mode,
-    /// Budget mode: faces to return at most.
-    #[arg(long, default_value_t = 100_000)]
-    budget: u64,
-    /// Vmsse mode: screen-space error bound in pixels.
-    #[arg(long, default_value_t = 1.0)]
-    tau: f64,
-    /// Threshold and naive modes' levels of detail: `screen[:PIXELS]` (the coarsest level whose
-    /// error is at most PIXELS, default 0.5, from anywhere in the cell) or `dov` (thesis eq. 5.6).
-    #[arg(long, default_value = "screen:0.5")]
-    lod_rule: LodRule,
+    #[command(flatten)]
+    answer: super::query::AnswerArgs,
     /// Colours: shaded (grey), dov (a ramp over log DoV) or lod (a palette by level).
     #[arg(long, default_value = "shaded")]
     color: ColorMode,
@@ -96,15 +81,7 @@ pub fn render(a: RenderCmd) -> Result<()> {
         let faces = (0..catalog.objects.len() as u32).map(|o| u64::from(catalog.object_lods(o)[0].faces)).sum();
         (full, catalog.objects.len(), faces, None)
     } else {
-        let params = QueryParams {
-            mode: a.mode,
-            eta: a.eta,
-            budget: a.budget,
-            tau: a.tau,
-            lod_rule: a.lod_rule,
-            camera: Some(view.camera()),
-            layout: None,
-        };
+        let params = a.answer.params(Some(view.camera()), None);
         let answer = db.query(a.at, &params)?;
         for w in &answer.warnings {
             eprintln!("warning: {w}");
