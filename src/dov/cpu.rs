@@ -150,6 +150,13 @@ struct Hit {
     tri: u32,
 }
 
+impl Hit {
+    /// The texel id this hit gives: its object, with [`BACK_FACE_BIT`] when seen from behind.
+    fn id(&self) -> u32 {
+        if self.back { self.obj | BACK_FACE_BIT } else { self.obj }
+    }
+}
+
 /// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
 /// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
 /// the lowest object id in the window, its nearest triangle there, a front face before a back face
@@ -188,7 +195,7 @@ impl TieWindow {
     }
 
     fn id(&self) -> u32 {
-        self.winner().map_or(NO_OBJECT, |h| if h.back { h.obj | BACK_FACE_BIT } else { h.obj })
+        self.winner().map_or(NO_OBJECT, Hit::id)
     }
 }
 
@@ -317,24 +324,33 @@ impl CpuBackend {
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
         let mut window = TieWindow::default();
         window.clear();
-        let Some(tlas) = &self.tlas else { return NO_OBJECT };
-        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
-        let world_ray = Ray::new(o, d, self.near, f32::INFINITY);
-        tlas.ray_traverse(world_ray, &mut RayHit::none(), |_, ii| {
-            let inst = &self.instances[ii];
-            let blas = &self.blases[inst.blas as usize];
-            let ray = self.instance_ray(inst, o, d, window.bound);
-            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
-                let t = blas.triangles[i].intersect(ray);
-                if t.is_finite() {
-                    window.add(blas.hit(inst, ii, i, t, ray));
-                }
-                window.bound
-            });
-            // Instance boxes beyond the tie window of the nearest hit cannot change the result.
+        // Boxes beyond the tie window of the nearest hit cannot change the result.
+        self.traverse_plainly(origin, dir, |hit| {
+            window.add(hit);
             window.bound
         });
         window.id()
+    }
+
+    /// One plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray enters
+    /// before the bound: `on_hit` takes each hit and returns the new bound.
+    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, mut on_hit: impl FnMut(Hit) -> f32) {
+        let Some(tlas) = &self.tlas else { return };
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let mut bound = f32::INFINITY;
+        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
+            let inst = &self.instances[ii];
+            let blas = &self.blases[inst.blas as usize];
+            let ray = self.instance_ray(inst, o, d, bound);
+            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
+                let t = blas.triangles[i].intersect(ray);
+                if t.is_finite() {
+                    bound = on_hit(blas.hit(inst, ii, i, t, ray));
+                }
+                bound
+            });
+            bound
+        });
     }
 
     /// The ids (with [`BACK_FACE_BIT`]) of the surfaces the ray from `origin` along `dir` meets
@@ -342,28 +358,13 @@ impl CpuBackend {
     /// ray's id depends on `f32` rounding of rays that start within about `near` of a tie, and
     /// the fast path's early culling may pick another of them than the reference tracer (tests).
     pub fn surfaces_at_nearest(&self, origin: Vec3, dir: Vec3) -> Vec<u32> {
-        let Some(tlas) = &self.tlas else { return Vec::new() };
-        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
         let mut hits: Vec<Hit> = Vec::new();
-        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
-            let inst = &self.instances[ii];
-            let blas = &self.blases[inst.blas as usize];
-            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
-            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
-                let t = blas.triangles[i].intersect(ray);
-                if t.is_finite() {
-                    hits.push(blas.hit(inst, ii, i, t, ray));
-                }
-                f32::INFINITY
-            });
+        self.traverse_plainly(origin, dir, |hit| {
+            hits.push(hit);
             f32::INFINITY
         });
         let nearest = hits.iter().map(|h| h.t).fold(f32::INFINITY, f32::min);
-        let mut ids: Vec<u32> = hits
-            .iter()
-            .filter(|h| h.t <= nearest * (1.0 + AMBIGUOUS_DEPTH))
-            .map(|h| if h.back { h.obj | BACK_FACE_BIT } else { h.obj })
-            .collect();
+        let mut ids: Vec<u32> = hits.iter().filter(|h| h.t <= nearest * (1.0 + AMBIGUOUS_DEPTH)).map(Hit::id).collect();
         ids.sort_unstable();
         ids.dedup();
         ids
