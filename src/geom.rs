@@ -62,6 +62,11 @@ impl Aabb {
         self.min.cmple(o.max).all() && self.max.cmpge(o.min).all()
     }
 
+    /// The distance between the nearest points of the two boxes (0 where they meet).
+    pub fn distance(&self, o: &Aabb) -> f32 {
+        (o.min - self.max).max(self.min - o.max).max(Vec3::ZERO).length()
+    }
+
     /// The box of the eight transformed corners: a conservative bound of the transformed content.
     pub fn transformed(&self, m: &Mat4) -> Aabb {
         if self.is_empty() {

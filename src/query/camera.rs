@@ -73,7 +73,7 @@ impl Camera {
 
 /// Distance from `p` to the nearest point of `b` (0 inside).
 pub fn distance_to_box(p: Vec3, b: &Aabb) -> f32 {
-    (b.min - p).max(p - b.max).max(Vec3::ZERO).length()
+    Aabb::new(p, p).distance(b)
 }
 
 /// A view frustum: four side planes through the eye, and the half-space in front of it.

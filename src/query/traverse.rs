@@ -173,7 +173,7 @@ impl Traversal<'_, '_> {
     /// level where the cell meets the box); `None` when no level is.
     fn coarsest_within_pixels(&self, chain: &[LodRef], mbr: &Aabb, scale: f64, pixels: f64) -> Option<usize> {
         let per_unit = self.params.camera.unwrap_or_default().pixels_per_unit();
-        let distance = f64::from(box_distance(&self.cell_box, mbr));
+        let distance = f64::from(self.cell_box.distance(mbr));
         (0..chain.len()).rev().find(|&l| f64::from(chain[l].error) * scale * per_unit <= pixels * distance)
     }
 
@@ -301,11 +301,6 @@ fn fit(chain: &[LodRef], budget: u64, preferred: usize) -> (usize, bool) {
 
 fn item(kind: ItemKind, id: u32, name: std::sync::Arc<str>, lod: usize, lod_ref: LodRef, d: f64, mbr: Aabb) -> Item {
     Item { kind, id, name, lod: lod as u32, faces: lod_ref.faces, dov: d as f32, mbr, lod_ref }
-}
-
-/// The distance between the nearest points of two boxes (0 where they meet).
-fn box_distance(a: &Aabb, b: &Aabb) -> f32 {
-    (b.min - a.max).max(a.min - b.max).max(Vec3::ZERO).length()
 }
 
 /// B(μ) = √μ, μ = DoV over the share of the sphere the box's bounding sphere covers from `at`
