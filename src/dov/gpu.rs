@@ -274,7 +274,6 @@ impl GpuBackend {
             .collect();
         let pipeline = create_pipeline(device, &bind_layout);
 
-        let extent = wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 };
         let face_targets = (0..FACE_COUNT)
             .map(|_| {
                 let texture = gpu.target("dov id face", resolution, resolution, wgpu::TextureFormat::R32Uint);
@@ -282,16 +281,7 @@ impl GpuBackend {
                 (texture, view)
             })
             .collect();
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("dov depth"),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
+        let depth = gpu.depth_buffer("dov depth", resolution, resolution);
         let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
         let padded_row_bytes = crate::gfx::padded_row_bytes(resolution, 4);
         let readback =

@@ -384,16 +384,7 @@ impl Renderer {
         let color = self.gpu.target("render colour", w, h, COLOR_FORMAT);
         let ids = self.gpu.target("render ids", w, h, ID_FORMAT);
         let depth_out = self.gpu.target("render depth out", w, h, DEPTH_OUT_FORMAT);
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("render depth"),
-            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
+        let depth = self.gpu.depth_buffer("render depth", w, h);
         let views: Vec<wgpu::TextureView> =
             [&color, &ids, &depth_out, &depth].iter().map(|t| t.create_view(&Default::default())).collect();
         let row = padded_row_bytes(w, 4);
