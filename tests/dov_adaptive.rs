@@ -1,5 +1,6 @@
-//! The adaptive from-region sampler (src/dov/adaptive.rs) against dense interior sampling on
-//! small random scenes of boxes behind walls, and inside a build.
+//! The from-region samplers — adaptive points (src/dov/adaptive.rs) and ray probing
+//! (src/dov/probe.rs) — against dense interior sampling on small random scenes of boxes behind
+//! walls, and inside a build.
 
 mod dov_common;
 
@@ -7,6 +8,7 @@ use dov_common::*;
 use glam::Vec3;
 use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard};
+use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -15,6 +17,12 @@ use proptest::prelude::*;
 /// 2 × 1 × 2 cells of 2 × 0.5 × 2 at eye height around the origin.
 fn grid() -> ViewGrid {
     ViewGrid::new(Aabb::new(Vec3::new(-2.0, 1.5, -2.0), Vec3::new(2.0, 2.0, 2.0)), [2, 1, 2])
+}
+
+/// 2 × 1 × 2 cells of 3 × 0.5 × 3: wider cells, whose corners miss more of what their interior
+/// sees.
+fn wide_grid() -> ViewGrid {
+    ViewGrid::new(Aabb::new(Vec3::new(-3.0, 1.5, -3.0), Vec3::new(3.0, 2.0, 3.0)), [2, 1, 2])
 }
 
 /// `walls` thin walls 4–6 from the grid's centre (each with its long side across the view), and
@@ -54,36 +62,61 @@ const DENSE: u32 = 64;
 /// it is luck, docs/dov.md, sub-texel features); above it, missing it pops in something visible.
 const TOLERANCE_TEXELS: f64 = 8.0;
 
+/// Checks that every (cell, object) pair that dense sampling sees with a DoV ≥ `tolerance`
+/// centre texels, the sampler of `options` (no floor) sees too.
+fn finds_what_dense_sampling_finds(
+    seed: u64,
+    walls: usize,
+    boxes: usize,
+    options: &PrecomputeOptions,
+    tolerance: f64,
+    grid: &ViewGrid,
+) -> Result<(), TestCaseError> {
+    let scene = walls_and_boxes(seed, walls, boxes);
+    let bounds = scene.all_object_bounds();
+    let shape = flat_shape(bounds.len());
+    let mut backend = CpuBackend::new(&scene, R).unwrap();
+    let texel = backend.cube_map().texel_floor();
+    let truth = dense_cells(&mut backend, grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
+    let got = precompute_shard(&mut backend, grid, &bounds, &shape, options, Shard::ALL, &mut |_, _| {}).unwrap();
+    for (t, (cell, g)) in truth.iter().zip(&got.cells) {
+        for &(object, dov) in &t.objects {
+            if f64::from(dov) >= tolerance * texel {
+                prop_assert!(
+                    g.object(object) > 0.0,
+                    "cell {cell}: object {object} (dense DoV {:.1} texels) not found",
+                    f64::from(dov) / texel
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Ray probing is held to half the adaptive sampler's tolerance, on wider cells: there its
+/// corners alone miss such objects (the test fails with probing switched off), and 60 random
+/// scenes passed with it on.
+const PROBE_TOLERANCE_TEXELS: f64 = 4.0;
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
 
-    /// Every (cell, object) pair that dense sampling sees with a DoV ≥ TOLERANCE_TEXELS, the
-    /// adaptive sampler sees too (by a sample point, no floor).
+    /// The adaptive sampler (2 seeds, at most 32 points per cell).
     #[test]
     fn adaptive_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
-        let scene = walls_and_boxes(seed, walls, boxes);
-        let bounds = scene.all_object_bounds();
-        let shape = flat_shape(bounds.len());
-        let grid = grid();
-        let mut backend = CpuBackend::new(&scene, R).unwrap();
-        let texel = backend.cube_map().texel_floor();
-        let truth = dense_cells(&mut backend, &grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
         let options = PrecomputeOptions {
             adaptive: Some(AdaptiveSampling::new(2, 32).unwrap()),
             zero_dov_tests: vec![],
             ..Default::default()
         };
-        let got = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
-        for (t, (cell, g)) in truth.iter().zip(&got.cells) {
-            for &(object, dov) in &t.objects {
-                if f64::from(dov) >= TOLERANCE_TEXELS * texel {
-                    prop_assert!(
-                        g.object(object) > 0.0,
-                        "cell {cell}: object {object} (dense DoV {:.1} texels) not found", f64::from(dov) / texel
-                    );
-                }
-            }
-        }
+        finds_what_dense_sampling_finds(seed, walls, boxes, &options, TOLERANCE_TEXELS, &grid())?;
+    }
+
+    /// Ray probing at its default, no floor: what it stores, a ray saw.
+    #[test]
+    fn probing_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
+        let options = PrecomputeOptions { probe: Some(RayProbing::DEFAULT), zero_dov_tests: vec![], ..Default::default() };
+        finds_what_dense_sampling_finds(seed, walls, boxes, &options, PROBE_TOLERANCE_TEXELS, &wide_grid())?;
     }
 }
 

@@ -23,7 +23,7 @@ use crate::db::{
 };
 use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
-use crate::dov::{BackendKind, open_backend};
+use crate::dov::{BackendKind, WithRays, open_backend};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
@@ -228,11 +228,15 @@ fn build_visibility(
     let t = Instant::now();
     let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, ..Default::default() };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
+    if v.probe.is_some() {
+        backend = WithRays::wrap(backend, scene)?;
+    }
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions {
         interior_samples: v.interior_samples,
         adaptive: v.adaptive,
+        probe: v.probe,
         zero_dov_tests: v.zero_dov_floor.clone(),
         ..Default::default()
     };

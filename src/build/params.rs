@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::dov::BackendKind;
 use crate::dov::adaptive::AdaptiveSampling;
 use crate::dov::precompute::{FloorTest, Shard};
+use crate::dov::probe::RayProbing;
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::lod::LodParams;
@@ -81,6 +82,10 @@ pub struct VisibilityParams {
     /// manifest, absent when off, so manifests of other builds are unchanged).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adaptive: Option<AdaptiveSampling>,
+    /// Ray probing after the measured points (`"probe:POINTS:RAYS"` in the manifest, absent when
+    /// off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe: Option<RayProbing>,
     /// Layouts to write.
     #[serde(with = "names")]
     pub layouts: Vec<LayoutKind>,
@@ -105,6 +110,7 @@ impl Default for VisibilityParams {
             backend: BackendKind::Auto,
             interior_samples: 0,
             adaptive: None,
+            probe: None,
             layouts: LayoutKind::ALL.to_vec(),
             dov_codec: DovCodec::F32,
             shard: None,

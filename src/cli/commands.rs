@@ -11,6 +11,7 @@ use hdov::db::Manifest;
 use hdov::dov::BackendKind;
 use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{FloorTest, Shard};
+use hdov::dov::probe::RayProbing;
 use hdov::error::{Error, Result};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -97,7 +98,9 @@ pub struct VisibilityArgs {
     resolution: u32,
     /// Sample points per cell: `corners` (the 8 shared corners), a number K of stratified
     /// interior points in addition to the corners, or `adaptive[:SEEDS:BUDGET]`: points where new
-    /// objects appear, at most BUDGET per cell (docs/dov.md).
+    /// objects appear, at most BUDGET per cell, or `probe[:POINTS:RAYS]`: rays from POINTS points
+    /// of each cell towards the objects its neighbourhood sees, RAYS per point and object
+    /// (docs/dov.md).
     #[arg(long, default_value = "corners", value_parser = parse_samples)]
     samples: Samples,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
@@ -119,7 +122,9 @@ pub struct VisibilityArgs {
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
-    #[arg(long, default_value = "box,neighbours", value_delimiter = ',')]
+    /// Default: box,neighbours; box alone with `--samples probe` (its rays check what the
+    /// neighbour test would guess).
+    #[arg(long, value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
     #[arg(long)]
@@ -131,17 +136,28 @@ impl VisibilityArgs {
         if self.no_visibility {
             return Ok(None);
         }
-        let floor = self.zero_dov_floor.iter().filter(|t| t.as_str() != "none");
+        let default_floor = match self.samples {
+            Samples::Probe(_) => "box",
+            _ => "box,neighbours",
+        };
+        let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();
+        let floor = if given.is_empty() { default_floor.split(',').collect() } else { given }
+            .into_iter()
+            .filter(|t| *t != "none");
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
             interior_samples: match self.samples {
                 Samples::Interior(k) => k,
-                Samples::Adaptive(_) => 0,
+                _ => 0,
             },
             adaptive: match self.samples {
                 Samples::Adaptive(a) => Some(a),
-                Samples::Interior(_) => None,
+                _ => None,
+            },
+            probe: match self.samples {
+                Samples::Probe(p) => Some(p),
+                _ => None,
             },
             layouts: self.layouts.clone(),
             dov_codec: self.dov_codec,
@@ -154,11 +170,13 @@ impl VisibilityArgs {
     }
 }
 
-/// What `--samples` chose: fixed interior points (0 = corners only) or the adaptive sampler.
+/// What `--samples` chose: fixed interior points (0 = corners only), the adaptive sampler or ray
+/// probing.
 #[derive(Clone, Copy, Debug)]
 enum Samples {
     Interior(u32),
     Adaptive(AdaptiveSampling),
+    Probe(RayProbing),
 }
 
 fn parse_samples(s: &str) -> std::result::Result<Samples, String> {
@@ -168,9 +186,14 @@ fn parse_samples(s: &str) -> std::result::Result<Samples, String> {
     if s.starts_with("adaptive") {
         return s.parse().map(Samples::Adaptive);
     }
-    s.parse()
-        .map(Samples::Interior)
-        .map_err(|_| format!("'{s}' is neither 'corners', a number of interior points, nor adaptive[:SEEDS:BUDGET]"))
+    if s.starts_with("probe") {
+        return s.parse().map(Samples::Probe);
+    }
+    s.parse().map(Samples::Interior).map_err(|_| {
+        format!(
+            "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET] nor probe[:POINTS:RAYS]"
+        )
+    })
 }
 
 #[derive(Args)]

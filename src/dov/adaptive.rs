@@ -62,17 +62,25 @@ impl std::str::FromStr for AdaptiveSampling {
     type Err = String;
     /// `adaptive` or `adaptive:SEEDS:BUDGET`.
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let Some(rest) = s.strip_prefix("adaptive") else {
-            return Err(format!("'{s}': expected adaptive or adaptive:SEEDS:BUDGET"));
-        };
-        if rest.is_empty() {
-            return Ok(Self::DEFAULT);
+        match parse_two_counts(s, "adaptive", "SEEDS:BUDGET")? {
+            None => Ok(Self::DEFAULT),
+            Some((seeds, budget)) => Self::new(seeds, budget),
         }
-        let count = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("'{s}': '{x}' is not a count"));
-        match rest.strip_prefix(':').and_then(|r| r.split_once(':')) {
-            Some((seeds, budget)) => Self::new(count(seeds)?, count(budget)?),
-            None => Err(format!("'{s}': expected adaptive or adaptive:SEEDS:BUDGET")),
-        }
+    }
+}
+
+/// Parses `NAME` (`None`: the defaults) or `NAME:A:B` (two counts); `shape` names the counts in
+/// errors (`SEEDS:BUDGET`).
+pub(crate) fn parse_two_counts(s: &str, name: &str, shape: &str) -> std::result::Result<Option<(u32, u32)>, String> {
+    let expected = || format!("'{s}': expected {name} or {name}:{shape}");
+    let Some(rest) = s.strip_prefix(name) else { return Err(expected()) };
+    if rest.is_empty() {
+        return Ok(None);
+    }
+    let count = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("'{s}': '{x}' is not a count"));
+    match rest.strip_prefix(':').and_then(|r| r.split_once(':')) {
+        Some((a, b)) => Ok(Some((count(a)?, count(b)?))),
+        None => Err(expected()),
     }
 }
 

@@ -34,6 +34,7 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
+use super::probe::{RayCaster, SurfaceTargets};
 use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_count, cubemap};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -213,6 +214,8 @@ pub struct CpuBackend {
     triangle_count: u64,
     /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
     wide: bool,
+    /// Where probe rays aim ([`super::probe`]).
+    targets: SurfaceTargets,
 }
 
 /// What one BLAS is built from.
@@ -303,6 +306,7 @@ impl CpuBackend {
             blases: kept,
             triangle_count: scene.triangle_count(),
             wide: wide_instructions(),
+            targets: SurfaceTargets::new(scene),
         })
     }
 
@@ -322,10 +326,16 @@ impl CpuBackend {
     /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
     /// enters before its nearest hit's tie window.
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
+        self.trace_within(origin, dir, f32::INFINITY)
+    }
+
+    /// [`CpuBackend::trace`] among the hits with `t ≤ tmax` only ([`NO_OBJECT`] if none).
+    pub fn trace_within(&self, origin: Vec3, dir: Vec3, tmax: f32) -> u32 {
         let mut window = TieWindow::default();
         window.clear();
+        window.bound = tmax;
         // Boxes beyond the tie window of the nearest hit cannot change the result.
-        self.traverse_plainly(origin, dir, |hit| {
+        self.traverse_plainly(origin, dir, tmax, |hit| {
             window.add(hit);
             window.bound
         });
@@ -334,11 +344,11 @@ impl CpuBackend {
 
     /// One plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray enters
     /// before the bound: `on_hit` takes each hit and returns the new bound.
-    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, mut on_hit: impl FnMut(Hit) -> f32) {
+    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, tmax: f32, mut on_hit: impl FnMut(Hit) -> f32) {
         let Some(tlas) = &self.tlas else { return };
         let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
-        let mut bound = f32::INFINITY;
-        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
+        let mut bound = tmax;
+        tlas.ray_traverse(Ray::new(o, d, self.near, tmax), &mut RayHit::none(), |_, ii| {
             let inst = &self.instances[ii];
             let blas = &self.blases[inst.blas as usize];
             let ray = self.instance_ray(inst, o, d, bound);
@@ -359,7 +369,7 @@ impl CpuBackend {
     /// the fast path's early culling may pick another of them than the reference tracer (tests).
     pub fn surfaces_at_nearest(&self, origin: Vec3, dir: Vec3) -> Vec<u32> {
         let mut hits: Vec<Hit> = Vec::new();
-        self.traverse_plainly(origin, dir, |hit| {
+        self.traverse_plainly(origin, dir, f32::INFINITY, |hit| {
             hits.push(hit);
             f32::INFINITY
         });
@@ -479,6 +489,10 @@ impl DovBackend for CpuBackend {
         &self.cube
     }
 
+    fn ray_caster(&self) -> Option<&dyn RayCaster> {
+        Some(self)
+    }
+
     fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()> {
         check_point(p)?;
         check_cube(out, self.cube.resolution())?;
@@ -500,6 +514,19 @@ impl DovBackend for CpuBackend {
             this.trace_band::<false>(o, face, row0, ids, state);
         });
         Ok(())
+    }
+}
+
+impl RayCaster for CpuBackend {
+    /// [`CpuBackend::trace_within`] with `dir` scaled so that its largest component is ±1, the
+    /// texel directions' convention, so that the near plane means the same distance.
+    fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32 {
+        let scale = dir.abs().max_element();
+        self.trace_within(origin, dir / scale, reach * scale)
+    }
+
+    fn targets(&self) -> &SurfaceTargets {
+        &self.targets
     }
 }
 

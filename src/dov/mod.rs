@@ -6,6 +6,7 @@
 //!   independent implementations, [`cpu::CpuBackend`] (ray casting over a BVH) and
 //!   [`gpu::GpuBackend`] (wgpu rasterisation), which must agree;
 //! - [`adaptive`]: extra sample points where new objects appear, per cell;
+//! - [`probe`]: rays aimed at the objects a cell might see, to find those its points miss;
 //! - [`precompute`]: from-region DoV of objects and tree nodes for every cell of a view grid.
 
 pub mod adaptive;
@@ -13,6 +14,7 @@ pub mod cpu;
 pub mod cubemap;
 pub mod gpu;
 pub mod precompute;
+pub mod probe;
 
 use std::collections::HashMap;
 
@@ -231,6 +233,52 @@ pub trait DovBackend {
         let mut ids = IdCube::new(self.resolution());
         self.render_ids(p, &mut ids)?;
         Ok(ids.dov(self.cube_map()))
+    }
+
+    /// Single rays through the same scene, for [`probe`]; `None` where the backend has none
+    /// (the GPU backend draws whole cube maps).
+    fn ray_caster(&self) -> Option<&dyn probe::RayCaster> {
+        None
+    }
+}
+
+/// A backend that measures with another and casts single rays ([`DovBackend::ray_caster`]) with a
+/// CPU backend of the same scene: what probing needs from the GPU backend, which only draws
+/// whole cube maps. Costs the CPU backend's BVHs in memory besides the other's.
+pub struct WithRays {
+    measuring: Box<dyn DovBackend>,
+    rays: CpuBackend,
+}
+
+impl WithRays {
+    /// `measuring` itself when it casts rays already.
+    pub fn wrap(measuring: Box<dyn DovBackend>, scene: &crate::scene::Scene) -> Result<Box<dyn DovBackend>> {
+        if measuring.ray_caster().is_some() {
+            return Ok(measuring);
+        }
+        let rays = CpuBackend::new(scene, measuring.resolution())?;
+        Ok(Box::new(WithRays { measuring, rays }))
+    }
+}
+
+impl DovBackend for WithRays {
+    fn name(&self) -> String {
+        format!("{}, rays by the cpu backend", self.measuring.name())
+    }
+    fn resolution(&self) -> u32 {
+        self.measuring.resolution()
+    }
+    fn cube_map(&self) -> &CubeMap {
+        self.measuring.cube_map()
+    }
+    fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        self.measuring.render_ids(p, out)
+    }
+    fn measure(&mut self, p: Vec3) -> Result<PointDov> {
+        self.measuring.measure(p)
+    }
+    fn ray_caster(&self) -> Option<&dyn probe::RayCaster> {
+        Some(&self.rays)
     }
 }
 

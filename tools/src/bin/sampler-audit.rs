@@ -1,15 +1,19 @@
 //! From-region samplers against dense interior sampling: per scene, for corners only (with the
-//! box floor and with the neighbour floor), fixed interior points and the adaptive sampler, the
-//! rate of visible (cell, object) pairs that no sample point sees (misses), the false floors, the
-//! distance of the cell DoV from the dense max, and the cost (points measured, build time) against
-//! corners only. The numbers of docs/dov.md, "Adaptive sampling".
+//! box floor and with the neighbour floor), fixed interior points, the adaptive sampler and ray
+//! probing, the rate of visible (cell, object) pairs that no sample point sees (misses), the share
+//! of the truth's DoV they carry, the false floors, the distance of the cell DoV from the dense
+//! max, and the cost (points measured, rays, CPU time) against corners only. The numbers of
+//! docs/dov.md, "Adaptive sampling" and "Ray probing".
 //!
 //! `cargo run --release -p hdov-tools --bin sampler-audit -- SCENE [R] [SHARD I/N] [DENSE] [SAMPLERS]`
 //!
 //! SCENE: `audit` (tests/dov_audit.rs's street block), `fence` (a picket fence of bars 0.25–8
-//! texels wide in front of small objects) or `city` (the default generated city, one shard of its
-//! cells). SAMPLERS: comma-separated `corners`, `neighbours` (corners + the neighbour floor), K
-//! (interior points) or `adaptive[:SEEDS:BUDGET]`.
+//! texels wide in front of small objects) or `city` (the default generated city). SHARD picks the
+//! cells the truth is taken for (it costs DENSE cube maps per cell); the samplers run on the whole
+//! grid, as a build does, so their costs per cell are a whole build's. SAMPLERS: comma-separated
+//! `corners`, `neighbours` (corners + the neighbour floor), K (interior points),
+//! `adaptive[:SEEDS:BUDGET]` or `probe[:POINTS:RAYS]` (without floor tests: its entries at the
+//! floor DoV are objects a ray saw, thinner than a texel, and count as found).
 //!
 //! Dense truth ([`dense_cells`]): per cell, the 8 corners and DENSE (default 64) Halton points
 //! from 1001 on (bases 2, 3, 5): a different part of the sequence from the samplers' points 1…,
@@ -27,6 +31,7 @@ use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{
     CellDov, DENSE_HALTON_START, FloorTest, PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard,
 };
+use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -38,6 +43,7 @@ enum Sampler {
     Corners { neighbours: bool },
     Interior(u32),
     Adaptive(AdaptiveSampling),
+    Probe(RayProbing),
 }
 
 impl Sampler {
@@ -46,6 +52,7 @@ impl Sampler {
             "corners" => Ok(Sampler::Corners { neighbours: false }),
             "neighbours" => Ok(Sampler::Corners { neighbours: true }),
             _ if s.starts_with("adaptive") => s.parse().map(Sampler::Adaptive),
+            _ if s.starts_with("probe") => s.parse().map(Sampler::Probe),
             _ => s.parse().map(Sampler::Interior).map_err(|_| format!("unknown sampler '{s}'")),
         }
     }
@@ -56,6 +63,7 @@ impl Sampler {
             Sampler::Corners { neighbours: true } => "corners + box, neighbours floors".into(),
             Sampler::Interior(k) => format!("corners + {k} interior + box floor"),
             Sampler::Adaptive(a) => format!("corners + {a} + box floor"),
+            Sampler::Probe(p) => format!("corners + {p}, no floor"),
         }
     }
 
@@ -66,6 +74,12 @@ impl Sampler {
             Sampler::Corners { .. } => {}
             Sampler::Interior(k) => o.interior_samples = k,
             Sampler::Adaptive(a) => o.adaptive = Some(a),
+            // No floor: every entry at the floor DoV is then one a probe ray verified (an object
+            // thinner than a texel), not a guess, and counts as found.
+            Sampler::Probe(p) => {
+                o.probe = Some(p);
+                o.zero_dov_tests.clear();
+            }
         }
         o
     }
@@ -121,21 +135,36 @@ struct Compare {
     deficit_max: f64,
     over_tolerance: usize,
     found: usize,
+    /// The truth's DoV summed over all pairs and over the missed ones.
+    truth_mass: f64,
+    missed_mass: f64,
+    /// Misses by the truth's DoV in centre texels (< 2, < 4, < 16, ≥ 16): not stored, floored.
+    by_size: [[usize; 4]; 2],
 }
 
-fn compare(truth: &[CellDov], got: &[(u32, CellDov)], cube: &CubeMap) -> Compare {
+/// `guessed_floors`: the sampler's entries at the floor DoV come from floor tests (guesses), so
+/// they count as misses where the truth saw more than the floor.
+fn compare(truth: &[CellDov], got: &[(u32, CellDov)], cube: &CubeMap, guessed_floors: bool) -> Compare {
     let texel = cube.texel_floor();
     let floor = texel as f32;
     let mut c = Compare::default();
-    for (t, (_, g)) in truth.iter().zip(got) {
+    for (t, (got_cell, g)) in truth.iter().zip(got) {
         c.truth_pairs += t.objects.len();
         for &(object, dense) in &t.objects {
             let v = g.object(object);
+            c.truth_mass += dense as f64;
             // A floored entry is stored (fetched at η ≤ floor) but was not sampled.
-            if v == 0.0 || (v == floor && dense > floor) {
+            if v == 0.0 || (guessed_floors && v == floor && dense > floor) {
                 c.missed += 1;
                 c.missed_large += usize::from(dense as f64 >= 4.0 * texel);
                 c.not_stored += usize::from(v == 0.0);
+                c.missed_mass += dense as f64;
+                let texels = dense as f64 / texel;
+                let bucket = [2.0, 4.0, 16.0].iter().filter(|&&b| texels >= b).count();
+                c.by_size[usize::from(v != 0.0)][bucket] += 1;
+                if std::env::var_os("HDOV_AUDIT_MISSES").is_some() {
+                    println!("    miss: cell {got_cell} object {object} truth {texels:.1} texels stored {}", v != 0.0);
+                }
                 continue;
             }
             let deficit = (dense - v).max(0.0) as f64;
@@ -190,24 +219,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let truth = dense_cells(&mut backend, &grid, &bounds, &shape, shard.cells(&grid), dense)?;
     println!("truth (Halton points from {DENSE_HALTON_START}): {:.1} s", t.elapsed().as_secs_f64());
     println!(
-        "| sampler | points / cell | time (s) | time / corners | misses (rate) | misses ≥ 4 texels | not stored | false floors (% of true) | mean DoV deficit | max deficit (texels) | beyond 0.5 % + 2 texels |"
+        "| sampler | points / cell | probe + footprint rays / cell | time (s) | CPU time (s) | CPU time / corners | misses (rate) | missed DoV | misses ≥ 4 texels | not stored | false floors (% of true) | mean DoV deficit | max deficit (texels) | beyond 0.5 % + 2 texels |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut corner_time = None;
     for sampler in samplers {
-        let t = Instant::now();
-        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &sampler.options(), shard, &mut |_, _| {})?;
+        let (t, cpu) = (Instant::now(), hdov_tools::process_cpu_time());
+        // The whole grid, as a build measures it (corners shared by all their cells); compared on
+        // the truth's cells.
+        let out =
+            precompute_shard(&mut backend, &grid, &bounds, &shape, &sampler.options(), Shard::ALL, &mut |_, _| {})?;
+        let all_cells = out.cells.len() as f64;
         let secs = t.elapsed().as_secs_f64();
-        let base = *corner_time.get_or_insert(secs);
-        let c = compare(&truth, &out.cells, &cube);
+        let cpu = (hdov_tools::process_cpu_time() - cpu).as_secs_f64();
+        // CPU time: steadier than the wall clock on a shared machine.
+        let base = *corner_time.get_or_insert(cpu);
+        let c = compare(&truth, &out.cells[cells.clone()], &cube, !sampler.options().zero_dov_tests.is_empty());
         let pct = |n: usize| 100.0 * n as f64 / c.truth_pairs.max(1) as f64;
         println!(
-            "| {} | {:.2} | {secs:.1} | {:.2}× | {} ({:.2} %) | {} ({:.2} %) | {} ({:.2} %) | {} ({:.1} %) | {:.2} % | {:.1} | {} |",
+            "| {} | {:.2} | {:.0} + {:.0} | {secs:.1} | {cpu:.1} | {:.2}× | {} ({:.2} %) | {:.3} % | {} ({:.2} %) | {} ({:.2} %) | {} ({:.1} %) | {:.2} % | {:.1} | {} |",
             sampler.name(),
-            out.points_measured as f64 / cells.len() as f64,
-            secs / base,
+            out.points_measured as f64 / all_cells,
+            out.probe_rays as f64 / all_cells,
+            out.footprint_rays as f64 / all_cells,
+            cpu / base,
             c.missed,
             pct(c.missed),
+            100.0 * c.missed_mass / c.truth_mass.max(f64::MIN_POSITIVE),
             c.missed_large,
             pct(c.missed_large),
             c.not_stored,
@@ -218,6 +256,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             c.deficit_max / cube.texel_floor(),
             c.over_tolerance
         );
+        if std::env::var_os("HDOV_AUDIT_MISSES").is_some() {
+            println!(
+                "    misses by truth texels (<2, <4, <16, ≥16): not stored {:?}, floored {:?}",
+                c.by_size[0], c.by_size[1]
+            );
+        }
     }
     println!(
         "true (cell, object) pairs: {}; load average now: {}",

@@ -204,12 +204,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         let cube = CubeMap::new(R);
         let bounds = scene.all_object_bounds();
         let with = |skip: bool, pts: &[&PointDov]| {
-            let o = PrecomputeOptions {
-                interior_samples: 0,
-                adaptive: None,
-                zero_dov_tests: Vec::new(),
-                skip_inside_points: skip,
-            };
+            let o = PrecomputeOptions { zero_dov_tests: Vec::new(), skip_inside_points: skip, ..Default::default() };
             cell_dov(pts, &[], &cell, &bounds, &shape, &o, &cube).object(building) as f64
         };
         (with(true, &refs), with(false, &refs), with(false, &outside))

@@ -1,0 +1,496 @@
+//! Ray probing: from-region visibility by rays aimed at objects (the directional form of guided
+//! visibility sampling, Wonka et al. 2006), instead of more whole cube maps.
+//!
+//! The cell's corners are measured anyway and say what they see. The objects a cell could also
+//! see are few and known beforehand: those its neighbours' corners see (views change
+//! continuously, so an object seen just outside the cell is the likeliest to be seen from part of
+//! it) and those whose box meets the cell. For each such *candidate* that no corner sees, rays go
+//! from `points` well-spread points of the cell towards points spread over the candidate's surface
+//! ([`SurfaceTargets`]), `rays` per point, until one meets the candidate first: it is then seen,
+//! from that point, for certain. Any other unseen object such a ray meets first is seen too. A
+//! seen object's DoV from its finding point is measured on the cube map's own texels, only those
+//! whose centre ray enters the object's box (its *footprint*), so it is the DoV a whole cube map
+//! at that point would give that object.
+//!
+//! Cost: at most candidates × `points` × `rays` rays plus the footprints of what is found, against
+//! 6·R² rays per cube map; a candidate hidden from the whole cell costs all its rays (nothing
+//! proves it hidden earlier), so the hidden candidates set the price.
+//!
+//! An object seen only through a gap narrower than the spacing of its targets, or only from
+//! places between the probe points, can still be missed: the audit in docs/dov.md measures how
+//! often against dense sampling.
+
+use std::collections::HashMap;
+
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+
+use super::cubemap::{FACE_COUNT, face_basis};
+use super::precompute::halton3;
+use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
+use crate::geom::Aabb;
+use crate::scene::Scene;
+
+/// Parameters of ray probing: `points` probe points per cell, `rays` rays from each towards each
+/// unseen candidate. Written `probe:POINTS:RAYS` (`probe` alone is [`RayProbing::DEFAULT`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub struct RayProbing {
+    pub points: u32,
+    pub rays: u32,
+}
+
+impl RayProbing {
+    /// Chosen by the audit in docs/dov.md ("Ray probing").
+    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4 };
+
+    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`.
+    pub fn new(points: u32, rays: u32) -> std::result::Result<Self, String> {
+        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) {
+            return Err(format!("probe:{points}:{rays}: need 1 ≤ POINTS ≤ 4096 and 1 ≤ RAYS ≤ 4096"));
+        }
+        Ok(Self { points, rays })
+    }
+}
+
+impl std::fmt::Display for RayProbing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "probe:{}:{}", self.points, self.rays)
+    }
+}
+
+impl std::str::FromStr for RayProbing {
+    type Err = String;
+    /// `probe` or `probe:POINTS:RAYS`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match super::adaptive::parse_two_counts(s, "probe", "POINTS:RAYS")? {
+            None => Ok(Self::DEFAULT),
+            Some((points, rays)) => Self::new(points, rays),
+        }
+    }
+}
+
+impl From<RayProbing> for String {
+    fn from(a: RayProbing) -> String {
+        a.to_string()
+    }
+}
+
+impl TryFrom<String> for RayProbing {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+/// Single rays through a scene, with the id rule of [`super::DovBackend::render_ids`]. The CPU
+/// backend is one ([`super::DovBackend::ray_caster`]).
+pub trait RayCaster: Sync {
+    /// The id seen from `origin` along `dir` (any length) among the surfaces within `reach`
+    /// lengths of `dir` (infinity: all): object id, with [`BACK_FACE_BIT`] when its surface is
+    /// seen from behind, or [`NO_OBJECT`].
+    fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32;
+
+    /// Points on every object's surface to aim at.
+    fn targets(&self) -> &SurfaceTargets;
+}
+
+/// Points spread over each object's surface, by area: [`SurfaceTargets::PER_MESH`] per base mesh
+/// in model space (instances share them), carried to the world by the object's transform.
+pub struct SurfaceTargets {
+    /// Model-space points of each base mesh.
+    mesh_points: Vec<Vec<Vec3>>,
+    /// Base mesh and model → world transform of each object.
+    objects: Vec<(u32, Affine3A)>,
+    /// Centre of each object's box: the target of an object without area.
+    centres: Vec<Vec3>,
+}
+
+impl SurfaceTargets {
+    /// Points per base mesh: enough that 64 probe points × 4 rays aim at 256 different places.
+    pub const PER_MESH: usize = 256;
+
+    /// Costs one pass over the scene's stored triangles.
+    pub fn new(scene: &Scene) -> Self {
+        let mesh_points = scene.meshes.iter().map(|m| spread_over(&m.mesh.triangles().collect::<Vec<_>>())).collect();
+        let objects = scene.objects.iter().map(|o| (o.mesh, Affine3A::from_mat4(o.transform))).collect();
+        let centres = scene.all_object_bounds().iter().map(Aabb::center).collect();
+        Self { mesh_points, objects, centres }
+    }
+
+    /// The `k`-th target of `object` (cycling through its points).
+    pub fn target(&self, object: u32, k: usize) -> Vec3 {
+        let (mesh, to_world) = &self.objects[object as usize];
+        let points = &self.mesh_points[*mesh as usize];
+        if points.is_empty() {
+            return self.centres[object as usize];
+        }
+        to_world.transform_point3(points[k % points.len()])
+    }
+}
+
+/// [`SurfaceTargets::PER_MESH`] points over `triangles`, each triangle getting its share of the
+/// area: stratified along the cumulative area, Halton-spread inside each triangle.
+fn spread_over(triangles: &[[Vec3; 3]]) -> Vec<Vec3> {
+    let mut cumulative = Vec::with_capacity(triangles.len());
+    let mut total = 0.0f64;
+    for t in triangles {
+        total += 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length() as f64;
+        cumulative.push(total);
+    }
+    if !(total > 0.0 && total.is_finite()) {
+        return Vec::new();
+    }
+    let n = SurfaceTargets::PER_MESH;
+    (0..n)
+        .map(|k| {
+            let x = (k as f64 + 0.5) / n as f64 * total;
+            let t = &triangles[cumulative.partition_point(|&c| c < x).min(triangles.len() - 1)];
+            let h = halton3(k as u32 + 1);
+            let (mut a, mut b) = (h.x, h.y);
+            if a + b > 1.0 {
+                (a, b) = (1.0 - a, 1.0 - b);
+            }
+            t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0])
+        })
+        .collect()
+}
+
+/// How far past its target a probe ray looks, in lengths of the ray to the target: the target lies
+/// on the object's surface, so a ray that meets the object meets it by then (the margin is for
+/// rounding); what lies behind cannot change the answer.
+const TARGET_REACH: f32 = 1.001;
+
+/// The probe points of a cell and how rays go from them towards an object's targets.
+struct Aim<'a> {
+    rays: &'a dyn RayCaster,
+    points: &'a [Vec3],
+    /// Whether each point lies outside geometry (only those cast).
+    outside: &'a [bool],
+    per_point: usize,
+}
+
+impl Aim<'_> {
+    /// Casts `per_point` rays from each probe point outside geometry towards `object`'s targets
+    /// (each point its own targets), calling `on_hit(point, id)` with each first hit until it
+    /// returns false.
+    fn each_ray(&self, object: u32, mut on_hit: impl FnMut(usize, u32) -> bool) {
+        for (i, &p) in self.points.iter().enumerate().filter(|&(i, _)| self.outside[i]) {
+            for j in 0..self.per_point {
+                let d = self.rays.targets().target(object, i * self.per_point + j) - p;
+                if d.length_squared() > 0.0 && !on_hit(i, self.rays.first_hit(p, d, TARGET_REACH)) {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// Directions from a point for telling whether it lies inside geometry: the 26 neighbours of a
+/// cube's centre.
+fn inside_test_directions() -> impl Iterator<Item = Vec3> {
+    (0..27)
+        .filter(|&i| i != 13)
+        .map(|i| Vec3::new((i % 3) as f32 - 1.0, (i / 3 % 3) as f32 - 1.0, (i / 9) as f32 - 1.0))
+}
+
+/// Whether `p` sees mostly back faces (inside a closed mesh): such points are left out, as
+/// [`super::precompute::PrecomputeOptions::skip_inside_points`] leaves out measured ones.
+fn is_inside(rays: &dyn RayCaster, p: Vec3) -> bool {
+    let (mut back, mut hits) = (0, 0);
+    for d in inside_test_directions() {
+        let id = rays.first_hit(p, d, f32::INFINITY);
+        hits += usize::from(id != NO_OBJECT);
+        back += usize::from(id != NO_OBJECT && id & BACK_FACE_BIT != 0);
+    }
+    2 * back > hits.max(1)
+}
+
+/// What probing one cell found and cost.
+#[derive(Debug, Default)]
+pub struct CellProbe {
+    /// One partial point view per probe point that found something: the DoVs of the objects
+    /// found from it, measured on their footprints (the point's other objects are left out).
+    pub points: Vec<PointDov>,
+    /// Rays cast towards targets (and to tell inside points).
+    pub rays: u64,
+    /// Rays cast to measure the footprints of what was found.
+    pub footprint_rays: u64,
+}
+
+/// Probes the cell `cell` (see the module documentation). `seen`: the objects its measured points
+/// see (not probed); `candidates`: the objects to probe; `bounds`: every object's box.
+pub fn probe_cell(
+    rays: &dyn RayCaster,
+    cube: &CubeMap,
+    cell: &Aabb,
+    seen: &std::collections::HashSet<u32>,
+    candidates: &[u32],
+    bounds: &[Aabb],
+    probing: &RayProbing,
+) -> CellProbe {
+    let points: Vec<Vec3> = (1..=probing.points).map(|k| cell.min + halton3(k) * cell.extent()).collect();
+    let outside: Vec<bool> = points.par_iter().map(|&p| !is_inside(rays, p)).collect();
+    let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize };
+    let mut cast = 26 * points.len() as u64;
+    // Per candidate: the unseen objects its rays meet first, itself included, each with the
+    // point the ray came from; and the rays cast.
+    let searched: Vec<(Vec<(u32, usize)>, u64)> = candidates
+        .par_iter()
+        .filter(|c| !seen.contains(c))
+        .map(|&c| {
+            let mut met = Vec::new();
+            let mut n = 0u64;
+            aim.each_ray(c, |i, id| {
+                n += 1;
+                let object = id & !BACK_FACE_BIT;
+                if id != NO_OBJECT && !seen.contains(&object) {
+                    met.push((object, i));
+                }
+                object != c
+            });
+            (met, n)
+        })
+        .collect();
+    // Each found object with a point that sees it.
+    let mut found: Vec<(u32, usize)> = Vec::new();
+    for (met, n) in searched {
+        cast += n;
+        found.extend(met);
+    }
+    found.sort_unstable();
+    found.dedup_by_key(|f| f.0);
+    // A found object's DoV is taken at the point whose rays meet it most (the likeliest to see
+    // most of it), on its footprint there.
+    let measured: Vec<(usize, f64, u64, u64)> = found
+        .par_iter()
+        .map(|&(object, seen_from)| {
+            let mut hits = vec![0u32; points.len()];
+            let mut n = 0u64;
+            aim.each_ray(object, |i, id| {
+                n += 1;
+                hits[i] += u32::from(id & !BACK_FACE_BIT == object);
+                true
+            });
+            // Most hits; among equals, the earlier (better spread) point; without any (an object
+            // met on the way to another), the point that met it.
+            let best = (0..points.len())
+                .filter(|&i| hits[i] > 0)
+                .min_by_key(|&i| (std::cmp::Reverse(hits[i]), i))
+                .unwrap_or(seen_from);
+            let (dov, f) = footprint_dov(rays, cube, points[best], object, &bounds[object as usize]);
+            (best, dov, n, f)
+        })
+        .collect();
+    let mut footprint_rays = 0;
+    let mut by_point: HashMap<usize, Vec<(u32, f64)>> = HashMap::new();
+    for (&(object, _), (i, dov, n, footprint)) in found.iter().zip(measured) {
+        cast += n;
+        footprint_rays += footprint;
+        by_point.entry(i).or_default().push((object, dov));
+    }
+    let mut out: Vec<PointDov> = by_point
+        .into_values()
+        .map(|mut objects| {
+            objects.sort_unstable_by_key(|e| e.0);
+            PointDov { resolution: cube.resolution(), objects, back_face: 0.0, empty: 0.0 }
+        })
+        .collect();
+    out.sort_by_key(|p| p.objects[0].0);
+    CellProbe { points: out, rays: cast, footprint_rays }
+}
+
+/// The DoV of `object` from `p` on the cube map's texels whose centre ray enters its box `b`:
+/// what a whole cube map at `p` would give it. An object that a probe ray meets but no texel
+/// centre does (thinner than a texel from `p`: a pole, a wall seen edge-on) is measured again
+/// with [`SUBTEXELS`]² rays per texel, each worth that share of its texel, so that it gets
+/// about its true solid angle rather than nothing; if even those miss it, the one-texel floor (it
+/// is visible). Returns the DoV and the rays cast.
+fn footprint_dov(rays: &dyn RayCaster, cube: &CubeMap, p: Vec3, object: u32, b: &Aabb) -> (f64, u64) {
+    let (sum, cast) = footprint_sum(rays, cube, p, object, b, 1);
+    if sum > 0.0 {
+        return (sum / cube.total_weight(), cast);
+    }
+    let (fine, more) = footprint_sum(rays, cube, p, object, b, SUBTEXELS);
+    let dov = if fine > 0.0 { fine / cube.total_weight() } else { cube.texel_floor() };
+    (dov, cast + more)
+}
+
+/// Rays per texel edge of a footprint measured again (see [`footprint_dov`]).
+const SUBTEXELS: u32 = 2;
+
+/// The solid angle of `object` seen from `p` through the texels of its box's footprint, each
+/// traced by `sub`² rays (1: its centre, exactly as [`CubeMap::texel_direction`]), and the rays
+/// cast.
+fn footprint_sum(rays: &dyn RayCaster, cube: &CubeMap, p: Vec3, object: u32, b: &Aabb, sub: u32) -> (f64, u64) {
+    let r = cube.resolution();
+    let corners: Vec<Vec3> = (0..8).map(|i| Vec3::new(pick(b, i, 0), pick(b, i, 1), pick(b, i, 2)) - p).collect();
+    let texel = 2.0 / r as f64;
+    let offsets: Vec<f64> = (0..sub).map(|k| texel * ((k as f64 + 0.5) / sub as f64 - 0.5)).collect();
+    let share = 1.0 / (sub * sub) as f64;
+    let (mut sum, mut cast) = (0.0f64, 0u64);
+    for face in 0..FACE_COUNT {
+        let basis = face_basis(face);
+        let Some((cols, rows)) = face_rect(&corners, basis, r) else { continue };
+        for row in rows {
+            for col in cols.clone() {
+                let (u, v) = cube.texel_uv(row, col);
+                for dv in &offsets {
+                    for du in &offsets {
+                        let d = basis.forward + basis.right * (u + du) as f32 + basis.up * (v - dv) as f32;
+                        let Some(exit) = box_exit(p, d, b) else { continue };
+                        cast += 1;
+                        // Nothing beyond the box can be the object.
+                        if rays.first_hit(p, d, exit * TARGET_REACH) & !BACK_FACE_BIT == object {
+                            sum += cube.weight(row, col) * share;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (sum, cast)
+}
+
+/// Coordinate `axis` of box corner `i` (bit `axis` of `i` picks max).
+fn pick(b: &Aabb, i: usize, axis: usize) -> f32 {
+    if i >> axis & 1 == 1 { b.max[axis] } else { b.min[axis] }
+}
+
+/// The columns and rows of face `basis` that a box with corners `corners` (relative to the eye,
+/// in [`pick`]'s order) can cover, or `None` when it lies wholly behind the face. The part of the
+/// box in front of the face's plane projects inside the hull of its corners there and of the
+/// points where its edges cross the plane (just in front of it, where they project far out).
+fn face_rect(
+    corners: &[Vec3],
+    basis: super::cubemap::FaceBasis,
+    r: u32,
+) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+    const IN_FRONT: f32 = 1e-6;
+    let z: Vec<f32> = corners.iter().map(|c| c.dot(basis.forward)).collect();
+    let mut points: Vec<Vec3> = (0..8).filter(|&i| z[i] > IN_FRONT).map(|i| corners[i]).collect();
+    if points.is_empty() {
+        return None;
+    }
+    // The 12 edges join corners that differ in one bit.
+    for i in 0..8 {
+        for axis in 0..3 {
+            let j = i | 1 << axis;
+            if j != i && (z[i] > IN_FRONT) != (z[j] > IN_FRONT) {
+                let s = (IN_FRONT - z[i]) / (z[j] - z[i]);
+                points.push(corners[i] + s * (corners[j] - corners[i]));
+            }
+        }
+    }
+    let (mut u0, mut u1, mut v0, mut v1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    for c in &points {
+        let z = c.dot(basis.forward).max(IN_FRONT);
+        let (u, v) = (c.dot(basis.right) / z, c.dot(basis.up) / z);
+        (u0, u1, v0, v1) = (u0.min(u), u1.max(u), v0.min(v), v1.max(v));
+    }
+    if u1 < -1.0 || u0 > 1.0 || v1 < -1.0 || v0 > 1.0 {
+        return None;
+    }
+    // Texel centres: u = 2(col + ½)/R − 1, v = 1 − 2(row + ½)/R; one texel of slack each side.
+    let rf = r as f32;
+    let col = |u: f32| ((u + 1.0) * 0.5 * rf).clamp(0.0, rf);
+    let row = |v: f32| ((1.0 - v) * 0.5 * rf).clamp(0.0, rf);
+    let cols = (col(u0) as u32).saturating_sub(1)..(col(u1) as u32 + 1).min(r);
+    let rows = (row(v1) as u32).saturating_sub(1)..(row(v0) as u32 + 1).min(r);
+    Some((cols, rows))
+}
+
+/// Where the ray from `p` along `d` (t ≥ 0) leaves box `b`, slightly grown against rounding, if
+/// it enters it at all.
+fn box_exit(p: Vec3, d: Vec3, b: &Aabb) -> Option<f32> {
+    let pad = 1e-4 * b.extent().max_element().max(1e-3);
+    let inv = d.recip();
+    let t0 = (b.min - Vec3::splat(pad) - p) * inv;
+    let t1 = (b.max + Vec3::splat(pad) - p) * inv;
+    let near = t0.min(t1).max_element().max(0.0);
+    let far = t0.max(t1).min_element();
+    (near <= far).then_some(far)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dov::{CpuBackend, DovBackend};
+
+    /// A few boxes around the origin, some straddling cube faces.
+    fn boxes() -> Scene {
+        let mut s = Scene::default();
+        s.add_box("front", Vec3::new(-1.0, -0.5, 4.0), Vec3::new(1.5, 1.0, 4.5));
+        s.add_box("corner", Vec3::new(3.0, -1.0, 3.0), Vec3::new(5.0, 2.0, 5.0));
+        s.add_box("below", Vec3::new(-6.0, -3.0, -6.0), Vec3::new(6.0, -2.0, 6.0));
+        s.add_box("far", Vec3::new(-20.0, 3.0, -30.0), Vec3::new(-19.0, 4.0, -29.5));
+        s
+    }
+
+    #[test]
+    fn a_footprint_gives_the_dov_a_whole_cube_map_gives() {
+        let scene = boxes();
+        let mut cpu = CpuBackend::new(&scene, 32).unwrap();
+        let bounds = scene.all_object_bounds();
+        for p in [Vec3::ZERO, Vec3::new(0.3, 0.2, -0.7)] {
+            let whole = cpu.measure(p).unwrap();
+            let cube = cpu.cube_map().clone();
+            for (o, b) in bounds.iter().enumerate() {
+                let (dov, _) = footprint_dov(&cpu, &cube, p, o as u32, b);
+                match whole.objects.iter().find(|e| e.0 == o as u32) {
+                    Some(&(_, expected)) => {
+                        assert!((dov - expected).abs() < 1e-12, "object {o} from {p}: {dov} vs {expected}")
+                    }
+                    // The far box falls between texel centres from the origin: measured finer.
+                    None => assert!(dov > 0.0 && dov < 2.0 * cube.texel_floor(), "object {o} from {p}: {dov}"),
+                }
+            }
+        }
+    }
+
+    /// Rectangle of w × h centred on the axis at distance d: 4·asin(sin α · sin β).
+    fn rectangle_dov(w: f64, h: f64, d: f64) -> f64 {
+        4.0 * ((w / 2.0 / d).atan().sin() * (h / 2.0 / d).atan().sin()).asin() / (4.0 * std::f64::consts::PI)
+    }
+
+    #[test]
+    fn a_pole_between_texel_centres_gets_about_its_solid_angle() {
+        // R = 32: texel centres at x = ±0.3125 at distance 10 on face +Z; the pole (0.2 wide,
+        // a third of a texel) lies between them, so the whole cube map misses it.
+        let mut scene = Scene::default();
+        scene.add_box("pole", Vec3::new(-0.1, -1.0, 10.0), Vec3::new(0.1, 1.0, 10.05));
+        let mut cpu = CpuBackend::new(&scene, 32).unwrap();
+        assert!(cpu.measure(Vec3::ZERO).unwrap().objects.is_empty());
+        let cube = cpu.cube_map().clone();
+        let (dov, _) = footprint_dov(&cpu, &cube, Vec3::ZERO, 0, &scene.object_bounds(0));
+        let truth = rectangle_dov(0.2, 2.0, 10.0);
+        // Sub-texel columns are 1/SUBTEXELS of a texel apart: the estimate is within one of them.
+        let column = rectangle_dov(0.625 / SUBTEXELS as f64, 2.0, 10.0);
+        assert!((dov - truth).abs() <= column, "pole: {dov} vs {truth} (± {column})");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// Whatever the boxes and the point (boxes straddling cube faces, behind the point, around
+        /// it), an object's footprint DoV is exactly what the whole cube map gives it.
+        #[test]
+        fn footprints_equal_whole_cube_maps(
+            boxes in proptest::collection::vec(([-8.0f32..8.0, -8.0f32..8.0, -8.0f32..8.0], [0.05f32..6.0, 0.05f32..6.0, 0.05f32..6.0]), 1..6),
+            eye in [-2.0f32..2.0, -2.0f32..2.0, -2.0f32..2.0],
+        ) {
+            let mut scene = Scene::default();
+            for (i, (min, size)) in boxes.iter().enumerate() {
+                let min = Vec3::from(*min);
+                scene.add_box(&format!("b{i}"), min, min + Vec3::from(*size));
+            }
+            let mut cpu = CpuBackend::new(&scene, 16).unwrap();
+            let p = Vec3::from(eye);
+            let whole = cpu.measure(p).unwrap();
+            let cube = cpu.cube_map().clone();
+            for &(o, expected) in &whole.objects {
+                let (dov, _) = footprint_dov(&cpu, &cube, p, o, &scene.object_bounds(o as usize));
+                proptest::prop_assert!((dov - expected).abs() < 1e-12, "object {} from {}: {} vs {}", o, p, dov, expected);
+            }
+        }
+    }
+}
