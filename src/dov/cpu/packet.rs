@@ -1,0 +1,247 @@
+//! Packet tracing for the AVX2 build of `render_ids`: eight rays of one 4 × 2 block of texels,
+//! which share their origin, go through each BVH together, one AVX2 lane per ray
+//! (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–62).
+//!
+//! A node is fetched and its children's quantised bounds converted once for the eight rays, and
+//! the stack holds one entry per node for all of them. Each lane does obvhs's own box test and
+//! [`RayTriangle::intersect`]'s arithmetic, operation for operation (the same products, sums,
+//! min/max operand order and comparisons), with its own `tmax`, so a ray enters exactly the boxes
+//! and hits exactly the triangles its own traversal would (tested lane against single ray): only
+//! the order of visits changes, which the tie window's id does not depend on.
+
+use std::arch::x86_64::*;
+
+use glam::Vec3A;
+use obvhs::{
+    cwbvh::{CwBvh, node::CwBvhNode},
+    ray::Ray,
+};
+
+use super::{NODE_TMIN, RayTriangle};
+
+/// Rays per packet: one AVX2 register of `f32`.
+pub(super) const LANES: usize = 8;
+/// A packet's texels: `PACKET_COLS` columns of `LANES / PACKET_COLS` rows, lane `row · COLS + col`.
+pub(super) const PACKET_COLS: usize = 4;
+
+/// Eight rays from one origin in one BVH's space, lane by lane.
+#[derive(Clone, Copy)]
+pub(super) struct Packet {
+    pub origin: Vec3A,
+    /// Each lane's direction, and the same by axis.
+    pub dirs: [Vec3A; LANES],
+    dir: [__m256; 3],
+    /// obvhs's `Ray::inv_direction` of each lane.
+    inv: [__m256; 3],
+    /// The lanes in use.
+    pub lanes: u32,
+    /// Bit `l` of `negative[axis]`: lane `l`'s direction is `< 0` on that axis (obvhs's octant).
+    negative: [u32; 3],
+}
+
+impl Packet {
+    /// The packet of the rays from `origin` along `dirs` (lanes outside `lanes` are ignored).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn new(origin: Vec3A, dirs: &[Vec3A; LANES], lanes: u32) -> Self {
+        let (mut d, mut inv) = ([[0f32; LANES]; 3], [[0f32; LANES]; 3]);
+        let mut negative = [0u32; 3];
+        for (l, dir) in dirs.iter().enumerate() {
+            // obvhs's own inverse (its `safe_inverse` for tiny components).
+            let ray = Ray::new(origin, *dir, 0.0, f32::INFINITY);
+            for axis in 0..3 {
+                d[axis][l] = dir[axis];
+                inv[axis][l] = ray.inv_direction[axis];
+                negative[axis] |= u32::from(dir[axis] < 0.0) << l;
+            }
+        }
+        Self {
+            origin,
+            dirs: *dirs,
+            dir: d.map(|a| load(&a)),
+            inv: inv.map(|a| load(&a)),
+            lanes,
+            negative,
+        }
+    }
+
+    /// obvhs's octant of lane `l` (bit 2: x < 0, bit 1: y < 0, bit 0: z < 0).
+    #[inline(always)]
+    fn octant(&self, l: u32) -> u32 {
+        ((self.negative[0] >> l) & 1) << 2 | ((self.negative[1] >> l) & 1) << 1 | ((self.negative[2] >> l) & 1)
+    }
+
+    /// `lanes` split into groups of one octant each, as (octant, lanes) (one group, mostly).
+    #[inline(always)]
+    fn octant_groups(&self, lanes: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
+        let mut left = lanes;
+        std::iter::from_fn(move || {
+            if left == 0 {
+                return None;
+            }
+            let oct = self.octant(left.trailing_zeros());
+            let group = (0..LANES as u32).filter(|&l| left & (1 << l) != 0 && self.octant(l) == oct).fold(0, |m, l| m | 1 << l);
+            left &= !group;
+            Some((oct, group))
+        })
+    }
+}
+
+/// The eight `f32` of `a` in one register.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn load(a: &[f32; LANES]) -> __m256 {
+    // SAFETY: reads 8 f32 from a reference to 8 f32.
+    unsafe { _mm256_loadu_ps(a.as_ptr()) }
+}
+
+/// The eight lanes of `v`.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn store(v: __m256) -> [f32; LANES] {
+    let mut a = [0f32; LANES];
+    // SAFETY: writes 8 f32 into an array of 8 f32.
+    unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+    a
+}
+
+/// [`RayTriangle::intersect`] for every lane: the lanes that hit `tri` with `tmin ≤ t ≤ tmax`
+/// (among `lanes`), each lane's `t`, and the lanes that see its back.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn intersect_triangle(
+    tri: &RayTriangle,
+    p: &Packet,
+    tmin: f32,
+    tmax: __m256,
+    lanes: u32,
+) -> (u32, __m256, u32) {
+    {
+        let [dx, dy, dz] = p.dir;
+        let c = tri.v0 - p.origin;
+        let (cx, cy, cz) = (_mm256_set1_ps(c.x), _mm256_set1_ps(c.y), _mm256_set1_ps(c.z));
+        let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
+        // r = d × c (glam's order: x = d.y·c.z − d.z·c.y, …).
+        let rx = sub(mul(dy, cz), mul(dz, cy));
+        let ry = sub(mul(dz, cx), mul(dx, cz));
+        let rz = sub(mul(dx, cy), mul(dy, cx));
+        // a · b = (a.x·b.x + a.y·b.y) + a.z·b.z, glam's order.
+        let dot = |x, y, z, v: Vec3A| {
+            add(add(mul(x, _mm256_set1_ps(v.x)), mul(y, _mm256_set1_ps(v.y))), mul(z, _mm256_set1_ps(v.z)))
+        };
+        let n_dot_d = dot(dx, dy, dz, tri.n);
+        let inv_det = _mm256_div_ps(_mm256_set1_ps(1.0), n_dot_d);
+        let u = mul(dot(rx, ry, rz, tri.e2), inv_det);
+        let v = mul(dot(rx, ry, rz, tri.e1), inv_det);
+        let w = sub(sub(_mm256_set1_ps(1.0), u), v);
+        let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
+        let det_nonzero = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
+        let t = mul(_mm256_set1_ps(tri.n.dot(c)), inv_det);
+        let in_range = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
+        );
+        let hits = lanes & det_nonzero & !signs & _mm256_movemask_ps(in_range) as u32;
+        // `RayTriangle::seen_from_behind`: n · d < 0.
+        let back = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, _mm256_setzero_ps())) as u32;
+        (hits, t, back)
+    }
+}
+
+/// For each child slot of `node`, the lanes of `lanes` (all of octant `oct`) that enter it:
+/// obvhs's `intersect_ray_simd` per lane, with each lane's `tmax`.
+#[target_feature(enable = "avx2")]
+#[inline]
+fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: __m256, lanes: u32) -> [u32; 8] {
+    {
+        let e = node.compute_extent();
+        let o = Vec3A::from(node.p) - p.origin;
+        // SAFETY: reads the 8 bytes of `b`.
+        let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(b.as_ptr().cast()) }));
+        let mut near = [[0f32; 8]; 3];
+        let mut far = [[0f32; 8]; 3];
+        let bounds = [
+            (&node.child_min_x, &node.child_max_x),
+            (&node.child_min_y, &node.child_max_y),
+            (&node.child_min_z, &node.child_max_z),
+        ];
+        let mut adj_dir = [_mm256_setzero_ps(); 3];
+        let mut adj_origin = [_mm256_setzero_ps(); 3];
+        for axis in 0..3 {
+            let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
+            // One octant: the near plane is the same side for every lane.
+            let (n, f) = if oct & (4 >> axis) != 0 { (hi, lo) } else { (lo, hi) };
+            near[axis] = store(n);
+            far[axis] = store(f);
+            // obvhs: extent · inv_direction and (p − origin) · inv_direction.
+            adj_dir[axis] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis]);
+            adj_origin[axis] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis]);
+        }
+        let plane = |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
+        let mut entered = [0u32; 8];
+        for (slot, lanes_in) in entered.iter_mut().enumerate() {
+            if node.child_meta[slot] == 0 {
+                continue;
+            }
+            let tmin_x = plane(near[0][slot], 0);
+            let tmin_y = plane(near[1][slot], 1);
+            let tmin_z = plane(near[2][slot], 2);
+            let tmax_x = plane(far[0][slot], 0);
+            let tmax_y = plane(far[1][slot], 1);
+            let tmax_z = plane(far[2][slot], 2);
+            let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+            let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+            let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
+            let t1 = _mm256_min_ps(t1, tmax);
+            *lanes_in = lanes & _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32;
+        }
+        entered
+    }
+}
+
+/// Where a packet traversal keeps its per-lane bounds: `tmax` of each lane, read at every node.
+pub(super) trait LaneBounds {
+    fn tmax(&self) -> &[f32; LANES];
+}
+
+/// Traverses `bvh` with the lanes `lanes` of `p`, nearest children first: `leaf(bounds, primitive
+/// index, lanes)` for each primitive of each leaf a lane enters (primitive indices are positions in
+/// `bvh.primitive_indices`). `stack` is scratch space.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn traverse<B: LaneBounds>(
+    bvh: &CwBvh,
+    p: &Packet,
+    lanes: u32,
+    stack: &mut Vec<(u32, u32)>,
+    bounds: &mut B,
+    mut leaf: impl FnMut(&mut B, usize, u32),
+) {
+    for (oct, group) in p.octant_groups(lanes) {
+        stack.clear();
+        stack.push((0, group));
+        while let Some((index, lanes)) = stack.pop() {
+            let node = &bvh.nodes[index as usize];
+            let entered = enter_children(node, p, oct, load(bounds.tmax()), lanes);
+            // obvhs's build puts children in slots so that slot ^ octant runs near to far.
+            for k in (0..8u32).rev() {
+                let slot = (k ^ oct) as usize;
+                let m = entered[slot];
+                if m != 0 && !node.is_leaf(slot) {
+                    let before = node.imask as u32 & ((1u32 << slot) - 1);
+                    stack.push((node.child_base_idx + before.count_ones(), m));
+                }
+            }
+            for k in 0..8u32 {
+                let slot = (k ^ oct) as usize;
+                let m = entered[slot];
+                if m != 0 && node.is_leaf(slot) {
+                    let (first, count) = node.child_primitives(slot);
+                    for i in first..first + count {
+                        leaf(bounds, i as usize, m);
+                    }
+                }
+            }
+        }
+    }
+}
