@@ -245,3 +245,93 @@ pub(super) fn traverse<B: LaneBounds>(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::{
+        BvhBuildParams,
+        cwbvh::{builder::build_cwbvh_from_tris, node::extract_byte64},
+        triangle::Triangle,
+    };
+    use proptest::prelude::*;
+    use std::time::Duration;
+
+    fn vec3a() -> impl Strategy<Value = Vec3A> {
+        // Small integers make zero direction components, edge-on and on-edge cases common.
+        prop_oneof![
+            [-4.0f32..4.0, -4.0..4.0, -4.0..4.0].prop_map(Vec3A::from),
+            [-2i8..3, -2..3, -2..3].prop_map(|v| Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32)),
+        ]
+    }
+
+    /// Eight directions, eight `tmax` (some infinite) and the lanes in use.
+    fn lanes() -> impl Strategy<Value = ([Vec3A; LANES], [f32; LANES], u32)> {
+        let tmax = || prop_oneof![Just(f32::INFINITY), 0.0f32..20.0];
+        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..256)
+    }
+
+    proptest! {
+        /// Every lane enters the children obvhs's own box test lets its ray enter, whatever the
+        /// packet's other lanes: the hit mask rebuilt from the lanes' per-child masks is
+        /// `CwBvhNode::intersect_ray`'s, at every node of a random BVH.
+        #[test]
+        fn lane_box_test_is_obvhs_box_test(
+            tris in prop::collection::vec([vec3a(), vec3a(), vec3a()], 1..60),
+            origin in vec3a(),
+            (dirs, tmax, lanes) in lanes(),
+        ) {
+            if !super::super::wide_instructions() {
+                eprintln!("skipped: no AVX2");
+                return Ok(());
+            }
+            let tris: Vec<Triangle> = tris.iter().map(|v| Triangle { v0: v[0], v1: v[1], v2: v[2] }).collect();
+            let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
+            // SAFETY: AVX2 is present (checked above).
+            let p = unsafe { Packet::new(origin, &dirs, lanes) };
+            for node in &bvh.nodes {
+                for (oct, group) in p.octant_groups(lanes) {
+                    // SAFETY: as above.
+                    let entered = unsafe { enter_children(node, &p, oct, load(&tmax), group) };
+                    for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
+                        let ray = Ray::new(origin, dirs[l], 0.0, tmax[l]);
+                        let oct_inv4 = bvh.new_traversal(dirs[l]).oct_inv4;
+                        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+                        let lane_mask = (0..8)
+                            .filter(|&slot| entered[slot] & (1 << l) != 0)
+                            .fold(0, |m, slot| m | extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot));
+                        prop_assert_eq!(lane_mask, node.intersect_ray(&ray, oct_inv4), "lane {}", l);
+                    }
+                }
+            }
+        }
+
+        /// Every lane's triangle test is `RayTriangle::intersect` (hit, `t` bit for bit) and
+        /// `seen_from_behind` for its ray.
+        #[test]
+        fn lane_triangle_test_is_ray_triangle_test(
+            v in [vec3a(), vec3a(), vec3a()], origin in vec3a(), (dirs, tmax, lanes) in lanes(), tmin in 0.0f32..0.5,
+        ) {
+            if !super::super::wide_instructions() {
+                eprintln!("skipped: no AVX2");
+                return Ok(());
+            }
+            let tri = RayTriangle::new(&Triangle { v0: v[0], v1: v[1], v2: v[2] });
+            // SAFETY: AVX2 is present (checked above).
+            let (hits, t, back) = unsafe {
+                let p = Packet::new(origin, &dirs, lanes);
+                let (hits, t, back) = intersect_triangle(&tri, &p, tmin, load(&tmax), lanes);
+                (hits, store(t), back)
+            };
+            for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
+                let ray = Ray::new(origin, dirs[l], tmin, tmax[l]);
+                let expected = tri.intersect(&ray);
+                prop_assert_eq!(hits & (1 << l) != 0, expected.is_finite(), "lane {}", l);
+                if expected.is_finite() {
+                    prop_assert_eq!(t[l].to_bits(), expected.to_bits(), "lane {}", l);
+                }
+                prop_assert_eq!(back & (1 << l) != 0, tri.seen_from_behind(dirs[l]), "lane {}", l);
+            }
+        }
+    }
+}
