@@ -55,14 +55,7 @@ impl Packet {
                 negative[axis] |= u32::from(dir[axis] < 0.0) << l;
             }
         }
-        Self {
-            origin,
-            dirs: *dirs,
-            dir: d.map(|a| load(&a)),
-            inv: inv.map(|a| load(&a)),
-            lanes,
-            negative,
-        }
+        Self { origin, dirs: *dirs, dir: d.map(|a| load(&a)), inv: inv.map(|a| load(&a)), lanes, negative }
     }
 
     /// obvhs's octant of lane `l` (bit 2: x < 0, bit 1: y < 0, bit 0: z < 0).
@@ -80,7 +73,8 @@ impl Packet {
                 return None;
             }
             let oct = self.octant(left.trailing_zeros());
-            let group = (0..LANES as u32).filter(|&l| left & (1 << l) != 0 && self.octant(l) == oct).fold(0, |m, l| m | 1 << l);
+            let group =
+                (0..LANES as u32).filter(|&l| left & (1 << l) != 0 && self.octant(l) == oct).fold(0, |m, l| m | 1 << l);
             left &= !group;
             Some((oct, group))
         })
@@ -137,10 +131,8 @@ pub(super) fn intersect_triangle(
         let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
         let det_nonzero = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
         let t = mul(_mm256_set1_ps(tri.n.dot(c)), inv_det);
-        let in_range = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
-        );
+        let in_range =
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)), _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax));
         let hits = lanes & det_nonzero & !signs & _mm256_movemask_ps(in_range) as u32;
         // `RayTriangle::seen_from_behind`: n · d < 0.
         let back = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, _mm256_setzero_ps())) as u32;
@@ -177,7 +169,8 @@ fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: __m256, lanes: u
             adj_dir[axis] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis]);
             adj_origin[axis] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis]);
         }
-        let plane = |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
+        let plane =
+            |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
         let mut entered = [0u32; 8];
         for (slot, lanes_in) in entered.iter_mut().enumerate() {
             if node.child_meta[slot] == 0 {
