@@ -71,6 +71,8 @@ struct PacketState {
     windows: LaneWindows,
     /// The previous packet's winning hits (instance, triangle), each once: tested first.
     last: Vec<(u32, u32)>,
+    /// This packet's, while it is traced.
+    winners: Vec<(u32, u32)>,
     tlas_stack: Vec<(u32, u32)>,
     blas_stack: Vec<(u32, u32)>,
 }
@@ -740,7 +742,7 @@ impl CpuBackend {
             }
         }
         ps.windows.reset(hint_t.map(|t| t * (1.0 + TIE_EPSILON)));
-        let PacketState { windows, last, tlas_stack, blas_stack } = ps;
+        let PacketState { windows, last, winners, tlas_stack, blas_stack } = ps;
         match &self.tlas {
             None => {}
             Some(_) if self.instances.len() == 1 => self.traverse_blas_packet(0, p, p.lanes, blas_stack, windows),
@@ -749,7 +751,7 @@ impl CpuBackend {
             }),
         }
         let mut ids = [NO_OBJECT; LANES];
-        let mut winners = Vec::new();
+        winners.clear();
         for l in (0..LANES).filter(|l| p.lanes & (1 << l) != 0) {
             let window = &mut windows.windows[l];
             if window.t_near > hint_t[l] {
@@ -767,7 +769,7 @@ impl CpuBackend {
         }
         // A packet of misses keeps the last hits: the next packet may well hit them.
         if !winners.is_empty() {
-            *last = winners;
+            std::mem::swap(last, winners);
         }
         ids
     }

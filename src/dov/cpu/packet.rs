@@ -64,20 +64,13 @@ impl Packet {
         ((self.negative[0] >> l) & 1) << 2 | ((self.negative[1] >> l) & 1) << 1 | ((self.negative[2] >> l) & 1)
     }
 
-    /// `lanes` split into groups of one octant each, as (octant, lanes) (one group, mostly).
+    /// The octant of the lowest lane of `lanes` (not empty) and the lanes of `lanes` in it:
+    /// traversals take a packet one octant at a time (one, mostly).
     #[inline(always)]
-    fn octant_groups(&self, lanes: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
-        let mut left = lanes;
-        std::iter::from_fn(move || {
-            if left == 0 {
-                return None;
-            }
-            let oct = self.octant(left.trailing_zeros());
-            let group =
-                (0..LANES as u32).filter(|&l| left & (1 << l) != 0 && self.octant(l) == oct).fold(0, |m, l| m | 1 << l);
-            left &= !group;
-            Some((oct, group))
-        })
+    fn octant_group(&self, lanes: u32) -> (u32, u32) {
+        let oct = self.octant(lanes.trailing_zeros());
+        let side = |axis: usize| if oct & (4 >> axis) != 0 { self.negative[axis] } else { !self.negative[axis] };
+        (oct, lanes & side(0) & side(1) & side(2))
     }
 }
 
@@ -210,7 +203,10 @@ pub(super) fn traverse<B: LaneBounds>(
     bounds: &mut B,
     mut leaf: impl FnMut(&mut B, usize, u32),
 ) {
-    for (oct, group) in p.octant_groups(lanes) {
+    let mut left = lanes;
+    while left != 0 {
+        let (oct, group) = p.octant_group(left);
+        left &= !group;
         stack.clear();
         stack.push((0, group));
         while let Some((index, lanes)) = stack.pop() {
@@ -283,7 +279,10 @@ mod tests {
             // SAFETY: AVX2 is present (checked above).
             let p = unsafe { Packet::new(origin, &dirs, lanes) };
             for node in &bvh.nodes {
-                for (oct, group) in p.octant_groups(lanes) {
+                let mut left = lanes;
+                while left != 0 {
+                    let (oct, group) = p.octant_group(left);
+                    left &= !group;
                     // SAFETY: as above.
                     let entered = unsafe { enter_children(node, &p, oct, load(&tmax), group) };
                     for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
