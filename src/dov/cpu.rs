@@ -271,7 +271,7 @@ pub struct CpuBackend {
     triangle_count: u64,
     /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
     wide: bool,
-    /// Whether [`CpuBackend::trace_band_wide`] traces packets of eight rays (else one ray at a time).
+    /// Whether [`CpuBackend::trace_band_wide`] traces packets of rays (else one ray at a time).
     packets: bool,
 }
 
@@ -377,7 +377,7 @@ impl CpuBackend {
         self.wide = on && wide_instructions();
     }
 
-    /// Lets the AVX2 build trace packets of eight rays (the default), or one ray at a time (the
+    /// Lets the AVX2 build trace packets of 4 × 4 rays (the default), or one ray at a time (the
     /// previous fast path, kept for comparison: tests and `ray-speed`; the ids are the same).
     pub fn set_packets(&mut self, on: bool) {
         self.packets = on;
@@ -685,8 +685,9 @@ impl CpuBackend {
         }
     }
 
-    /// [`CpuBackend::trace_band`] by packets: each tile in blocks of [`packet::PACKET_COLS`] ×
-    /// 2 texels, one [`CpuBackend::trace_packet`] each (partial blocks at the image's edges).
+    /// [`CpuBackend::trace_band`] by packets: each tile in blocks of [`packet::PACKET_COLS`]
+    /// columns of `LANES / PACKET_COLS` rows, one [`CpuBackend::trace_packet`] each (partial
+    /// blocks at the image's edges).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
@@ -734,8 +735,7 @@ impl CpuBackend {
             let inst = &self.instances[ii as usize];
             let q = self.instance_packet(inst, p);
             let tri = &self.blases[inst.blas as usize].triangles[i as usize];
-            let infinite = std::arch::x86_64::_mm256_set1_ps(f32::INFINITY);
-            let (hits, t, _) = packet::intersect_triangle(tri, &q, self.near, infinite, p.lanes);
+            let (hits, t, _) = packet::intersect_triangle(tri, &q, self.near, packet::splat(f32::INFINITY), p.lanes);
             let t = packet::store(t);
             for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
                 hint_t[l] = hint_t[l].min(t[l]);

@@ -1,8 +1,8 @@
-//! Packet tracing for the AVX2 build of `render_ids`: eight rays of one 4 × 2 block of texels,
-//! which share their origin, go through each BVH together, one AVX2 lane per ray
-//! (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–62).
+//! Packet tracing for the AVX2 build of `render_ids`: the sixteen rays of one 4 × 4 block of
+//! texels, which share their origin, go through each BVH together, one AVX2 lane per ray (two
+//! registers of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–62).
 //!
-//! A node is fetched and its children's quantised bounds converted once for the eight rays, and
+//! A node is fetched and its children's quantised bounds converted once for the sixteen rays, and
 //! the stack holds one entry per node for all of them. Each lane does obvhs's own box test and
 //! [`RayTriangle::intersect`]'s arithmetic, operation for operation (the same products, sums,
 //! min/max operand order and comparisons), with its own `tmax`, so a ray enters exactly the boxes
@@ -19,20 +19,24 @@ use obvhs::{
 
 use super::{NODE_TMIN, RayTriangle};
 
-/// Rays per packet: one AVX2 register of `f32`.
-pub(super) const LANES: usize = 8;
+/// AVX2 registers of `f32` per lane vector.
+const HALVES: usize = 2;
+/// Rays per packet.
+pub(super) const LANES: usize = 8 * HALVES;
+/// One `f32` per lane.
+pub(super) type Lanes = [__m256; HALVES];
 /// A packet's texels: `PACKET_COLS` columns of `LANES / PACKET_COLS` rows, lane `row · COLS + col`.
 pub(super) const PACKET_COLS: usize = 4;
 
-/// Eight rays from one origin in one BVH's space, lane by lane.
+/// [`LANES`] rays from one origin in one BVH's space, lane by lane.
 #[derive(Clone, Copy)]
 pub(super) struct Packet {
     pub origin: Vec3A,
     /// Each lane's direction, and the same by axis.
     pub dirs: [Vec3A; LANES],
-    dir: [__m256; 3],
+    dir: [Lanes; 3],
     /// obvhs's `Ray::inv_direction` of each lane.
-    inv: [__m256; 3],
+    inv: [Lanes; 3],
     /// The lanes in use.
     pub lanes: u32,
     /// Bit `l` of `negative[axis]`: lane `l`'s direction is `< 0` on that axis (obvhs's octant).
@@ -74,22 +78,31 @@ impl Packet {
     }
 }
 
-/// The eight `f32` of `a` in one register.
+/// The `f32` of `a` in registers.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(super) fn load(a: &[f32; LANES]) -> __m256 {
-    // SAFETY: reads 8 f32 from a reference to 8 f32.
-    unsafe { _mm256_loadu_ps(a.as_ptr()) }
+pub(super) fn load(a: &[f32; LANES]) -> Lanes {
+    // SAFETY: each load reads 8 f32 inside the array.
+    std::array::from_fn(|h| unsafe { _mm256_loadu_ps(a.as_ptr().add(8 * h)) })
 }
 
-/// The eight lanes of `v`.
+/// The lanes of `v`.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(super) fn store(v: __m256) -> [f32; LANES] {
+pub(super) fn store(v: Lanes) -> [f32; LANES] {
     let mut a = [0f32; LANES];
-    // SAFETY: writes 8 f32 into an array of 8 f32.
-    unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+    for (h, v) in v.iter().enumerate() {
+        // SAFETY: writes 8 f32 inside the array.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr().add(8 * h), *v) };
+    }
     a
+}
+
+/// `v` in every lane.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn splat(v: f32) -> Lanes {
+    [_mm256_set1_ps(v); HALVES]
 }
 
 /// [`RayTriangle::intersect`] for every lane: the lanes that hit `tri` with `tmin ≤ t ≤ tmax`
@@ -100,12 +113,14 @@ pub(super) fn intersect_triangle(
     tri: &RayTriangle,
     p: &Packet,
     tmin: f32,
-    tmax: __m256,
+    tmax: Lanes,
     lanes: u32,
-) -> (u32, __m256, u32) {
-    {
-        let [dx, dy, dz] = p.dir;
-        let c = tri.v0 - p.origin;
+) -> (u32, Lanes, u32) {
+    let c = tri.v0 - p.origin;
+    let n_dot_c = tri.n.dot(c);
+    let (mut hits, mut back, mut ts) = (0, 0, [_mm256_setzero_ps(); HALVES]);
+    for h in 0..HALVES {
+        let [dx, dy, dz] = p.dir.map(|d| d[h]);
         let (cx, cy, cz) = (_mm256_set1_ps(c.x), _mm256_set1_ps(c.y), _mm256_set1_ps(c.z));
         let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
         // r = d × c (glam's order: x = d.y·c.z − d.z·c.y, …).
@@ -123,21 +138,24 @@ pub(super) fn intersect_triangle(
         let w = sub(sub(_mm256_set1_ps(1.0), u), v);
         let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
         let det_nonzero = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
-        let t = mul(_mm256_set1_ps(tri.n.dot(c)), inv_det);
-        let in_range =
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)), _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax));
-        let hits = lanes & det_nonzero & !signs & _mm256_movemask_ps(in_range) as u32;
+        let t = mul(_mm256_set1_ps(n_dot_c), inv_det);
+        let in_range = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax[h]),
+        );
+        hits |= (det_nonzero & !signs & _mm256_movemask_ps(in_range) as u32) << (8 * h);
         // `RayTriangle::seen_from_behind`: n · d < 0.
-        let back = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, _mm256_setzero_ps())) as u32;
-        (hits, t, back)
+        back |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, _mm256_setzero_ps())) as u32) << (8 * h);
+        ts[h] = t;
     }
+    (hits & lanes, ts, back)
 }
 
 /// For each child slot of `node`, the lanes of `lanes` (all of octant `oct`) that enter it:
 /// obvhs's `intersect_ray_simd` per lane, with each lane's `tmax`.
 #[target_feature(enable = "avx2")]
 #[inline]
-fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: __m256, lanes: u32) -> [u32; 8] {
+fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: Lanes, lanes: u32) -> [u32; 8] {
     {
         let e = node.compute_extent();
         let o = Vec3A::from(node.p) - p.origin;
@@ -150,36 +168,43 @@ fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: __m256, lanes: u
             (&node.child_min_y, &node.child_max_y),
             (&node.child_min_z, &node.child_max_z),
         ];
-        let mut adj_dir = [_mm256_setzero_ps(); 3];
-        let mut adj_origin = [_mm256_setzero_ps(); 3];
+        let mut adj_dir = [[_mm256_setzero_ps(); HALVES]; 3];
+        let mut adj_origin = [[_mm256_setzero_ps(); HALVES]; 3];
         for axis in 0..3 {
             let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
             // One octant: the near plane is the same side for every lane.
             let (n, f) = if oct & (4 >> axis) != 0 { (hi, lo) } else { (lo, hi) };
-            near[axis] = store(n);
-            far[axis] = store(f);
+            // SAFETY: each store writes 8 f32 into an array of 8.
+            unsafe {
+                _mm256_storeu_ps(near[axis].as_mut_ptr(), n);
+                _mm256_storeu_ps(far[axis].as_mut_ptr(), f);
+            }
             // obvhs: extent · inv_direction and (p − origin) · inv_direction.
-            adj_dir[axis] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis]);
-            adj_origin[axis] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis]);
+            adj_dir[axis] = p.inv[axis].map(|inv| _mm256_mul_ps(_mm256_set1_ps(e[axis]), inv));
+            adj_origin[axis] = p.inv[axis].map(|inv| _mm256_mul_ps(_mm256_set1_ps(o[axis]), inv));
         }
-        let plane =
-            |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
+        let plane = |q: f32, axis: usize, h: usize| {
+            _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis][h]), adj_origin[axis][h])
+        };
         let mut entered = [0u32; 8];
         for (slot, lanes_in) in entered.iter_mut().enumerate() {
             if node.child_meta[slot] == 0 {
                 continue;
             }
-            let tmin_x = plane(near[0][slot], 0);
-            let tmin_y = plane(near[1][slot], 1);
-            let tmin_z = plane(near[2][slot], 2);
-            let tmax_x = plane(far[0][slot], 0);
-            let tmax_y = plane(far[1][slot], 1);
-            let tmax_z = plane(far[2][slot], 2);
-            let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
-            let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
-            let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
-            let t1 = _mm256_min_ps(t1, tmax);
-            *lanes_in = lanes & _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32;
+            for h in 0..HALVES {
+                let tmin_x = plane(near[0][slot], 0, h);
+                let tmin_y = plane(near[1][slot], 1, h);
+                let tmin_z = plane(near[2][slot], 2, h);
+                let tmax_x = plane(far[0][slot], 0, h);
+                let tmax_y = plane(far[1][slot], 1, h);
+                let tmax_z = plane(far[2][slot], 2, h);
+                let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+                let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+                let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
+                let t1 = _mm256_min_ps(t1, tmax[h]);
+                *lanes_in |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32) << (8 * h);
+            }
+            *lanes_in &= lanes;
         }
         entered
     }
@@ -254,10 +279,10 @@ mod tests {
         ]
     }
 
-    /// Eight directions, eight `tmax` (some infinite) and the lanes in use.
+    /// A direction and a `tmax` (some infinite) per lane, and the lanes in use.
     fn lanes() -> impl Strategy<Value = ([Vec3A; LANES], [f32; LANES], u32)> {
         let tmax = || prop_oneof![Just(f32::INFINITY), 0.0f32..20.0];
-        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..256)
+        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..1 << LANES)
     }
 
     proptest! {

@@ -5,7 +5,7 @@
 //! (`ViewGrid::resolve`, default 8 × 1 × 8 = 162 corners). At each point, on this one thread:
 //! `render_ids_reference` (one `trace` per texel: the straightforward tracer), and `render_ids` (the
 //! fast path, in a 1-thread rayon pool) twice: one ray at a time (`set_packets(false)`, the
-//! previous fast path) and by packets of eight rays (the default); each id cube must equal the
+//! previous fast path) and by packets of 4 × 4 rays (the default); each id cube must equal the
 //! reference's. Times are the process's CPU time (one thread busy at a time), steadier than the
 //! wall clock on a shared machine.
 //!
@@ -108,7 +108,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     speed("reference tracer", ms_reference, wall_reference);
     speed("render_ids, one ray at a time", ms_per_ray, wall_per_ray);
-    speed("render_ids, packets of 8 rays", ms_fast, wall_fast);
+    speed("render_ids, packets of 4 × 4 rays", ms_fast, wall_fast);
     println!(
         "texels differing from the reference, both fast routes: {differing} of 2 × {} (and {ties} ties up to rounding, answered by another of the tied surfaces)",
         rays as usize * points.len()
