@@ -11,7 +11,8 @@
 //! point than one world-space BLAS (docs/dov.md, speed).
 //!
 //! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
-//! triangle, with an AVX2 copy of the tracer chosen at run time; [`CpuBackend::render_ids_reference`]
+//! triangle, with an AVX2 copy of the tracer chosen at run time that takes each tile in packets of
+//! 4 × 4 rays (`packet`: one AVX2 lane per ray); [`CpuBackend::render_ids_reference`]
 //! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
 //!
 //! A ray entering an instance's box (nearer than the best hit so far) is carried into model space

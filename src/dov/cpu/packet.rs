@@ -1,6 +1,6 @@
 //! Packet tracing for the AVX2 build of `render_ids`: the sixteen rays of one 4 × 4 block of
 //! texels, which share their origin, go through each BVH together, one AVX2 lane per ray (two
-//! registers of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–62).
+//! registers of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63).
 //!
 //! A node is fetched and its children's quantised bounds converted once for the sixteen rays, and
 //! the stack holds one entry per node for all of them. Each lane does obvhs's own box test and
@@ -191,7 +191,7 @@ fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: Lanes, lanes: u3
             if node.child_meta[slot] == 0 {
                 continue;
             }
-            for h in 0..HALVES {
+            for (h, tmax) in tmax.iter().enumerate() {
                 let tmin_x = plane(near[0][slot], 0, h);
                 let tmin_y = plane(near[1][slot], 1, h);
                 let tmin_z = plane(near[2][slot], 2, h);
@@ -201,7 +201,7 @@ fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: Lanes, lanes: u3
                 let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
                 let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
                 let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
-                let t1 = _mm256_min_ps(t1, tmax[h]);
+                let t1 = _mm256_min_ps(t1, *tmax);
                 *lanes_in |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32) << (8 * h);
             }
             *lanes_in &= lanes;
