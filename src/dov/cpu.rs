@@ -273,6 +273,7 @@ pub struct CpuBackend {
     /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
     wide: bool,
     /// Whether [`CpuBackend::trace_band_wide`] traces packets of rays (else one ray at a time).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     packets: bool,
 }
 
