@@ -11,7 +11,8 @@
 //! point than one world-space BLAS (docs/dov.md, speed).
 //!
 //! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
-//! triangle, with an AVX2 copy of the tracer chosen at run time; [`CpuBackend::render_ids_reference`]
+//! triangle, with an AVX2 copy of the tracer chosen at run time that takes each tile in packets of
+//! 4 × 4 rays (`packet`: one AVX2 lane per ray); [`CpuBackend::render_ids_reference`]
 //! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
 //!
 //! A ray entering an instance's box (nearer than the best hit so far) is carried into model space
@@ -39,6 +40,9 @@ use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
+#[cfg(target_arch = "x86_64")]
+mod packet;
+
 /// Two hits whose ray parameters differ by less than this fraction are a tie; the lower object id
 /// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
@@ -58,6 +62,55 @@ struct TexelState {
     window: TieWindow,
     /// The previous texel's winning hit: instance and triangle.
     last: Option<(u32, u32)>,
+    #[cfg(target_arch = "x86_64")]
+    packet: PacketState,
+}
+
+/// What the packet tracer carries from one packet to the next on one thread.
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+struct PacketState {
+    windows: LaneWindows,
+    /// The previous packet's winning hits (instance, triangle), each once: tested first.
+    last: Vec<(u32, u32)>,
+    /// This packet's, while it is traced.
+    winners: Vec<(u32, u32)>,
+    tlas_stack: Vec<(u32, u32)>,
+    blas_stack: Vec<(u32, u32)>,
+}
+
+/// One tie window per lane of a packet, and their bounds side by side (the lanes' `tmax`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+struct LaneWindows {
+    windows: [TieWindow; packet::LANES],
+    bounds: [f32; packet::LANES],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneWindows {
+    /// Empties every window, with the bound `bounds[l]` on lane `l`.
+    fn reset(&mut self, bounds: [f32; packet::LANES]) {
+        for (w, &b) in self.windows.iter_mut().zip(&bounds) {
+            w.clear();
+            w.bound = b;
+        }
+        self.bounds = bounds;
+    }
+
+    #[inline(always)]
+    fn add(&mut self, lane: usize, hit: Hit) {
+        self.windows[lane].add(hit);
+        self.bounds[lane] = self.windows[lane].bound;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl packet::LaneBounds for LaneWindows {
+    #[inline(always)]
+    fn tmax(&self) -> &[f32; packet::LANES] {
+        &self.bounds
+    }
 }
 
 /// One bottom-level BVH and its triangles in the BVH's primitive order (no indirection while
@@ -80,15 +133,21 @@ struct Instance {
 }
 
 impl Blas {
-    /// The hit of `ray` (in this BLAS's space) on triangle `i` at `t`, through instance `inst`
-    /// (number `ii`). The back-face test in the triangle's own space: with n the model-space normal
-    /// and M the linear part of the transform, the world normal of the (winding-corrected) world
-    /// triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of n·d.
+    /// The hit on triangle `i` at `t` through instance `inst` (number `ii`), seen from behind
+    /// (`back`) or not. The back-face test is done in the triangle's own space: with n the
+    /// model-space normal and M the linear part of the transform, the world normal of the
+    /// (winding-corrected) world triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of
+    /// n·d.
     #[inline(always)]
-    fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
+    fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, back: bool) -> Hit {
         let obj = if inst.object == NO_OBJECT { self.objects[i] } else { inst.object };
-        let back = self.triangles[i].seen_from_behind(ray.direction);
         Hit { t, obj, back, instance: ii as u32, tri: i as u32 }
+    }
+
+    /// The hit of `ray` (in this BLAS's space) on triangle `i` at `t`.
+    #[inline(always)]
+    fn ray_hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
+        self.hit(inst, ii, i, t, self.triangles[i].seen_from_behind(ray.direction))
     }
 }
 
@@ -214,6 +273,9 @@ pub struct CpuBackend {
     triangle_count: u64,
     /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
     wide: bool,
+    /// Whether [`CpuBackend::trace_band_wide`] traces packets of rays (else one ray at a time).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    packets: bool,
     /// Where probe rays aim ([`super::probe`]).
     targets: SurfaceTargets,
 }
@@ -306,6 +368,7 @@ impl CpuBackend {
             blases: kept,
             triangle_count: scene.triangle_count(),
             wide: wide_instructions(),
+            packets: true,
             targets: SurfaceTargets::new(scene),
         })
     }
@@ -318,6 +381,12 @@ impl CpuBackend {
     /// keeps it to the portable build (tests compare both; the ids are the same).
     pub fn set_wide_instructions(&mut self, on: bool) {
         self.wide = on && wide_instructions();
+    }
+
+    /// Lets the AVX2 build trace packets of 4 × 4 rays (the default), or one ray at a time (the
+    /// previous fast path, kept for comparison: tests and `ray-speed`; the ids are the same).
+    pub fn set_packets(&mut self, on: bool) {
+        self.packets = on;
     }
 
     /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
@@ -355,7 +424,7 @@ impl CpuBackend {
             blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
                 let t = blas.triangles[i].intersect(ray);
                 if t.is_finite() {
-                    bound = on_hit(blas.hit(inst, ii, i, t, ray));
+                    bound = on_hit(blas.ray_hit(inst, ii, i, t, ray));
                 }
                 bound
             });
@@ -451,7 +520,7 @@ impl CpuBackend {
             let i = traversal.primitive_id as usize;
             let t = blas.triangles[i].intersect(&ray);
             if t.is_finite() {
-                window.add(blas.hit(inst, ii, i, t, &ray));
+                window.add(blas.ray_hit(inst, ii, i, t, &ray));
                 ray.tmax = window.bound;
             }
         });
@@ -624,6 +693,13 @@ impl CpuBackend {
         }
     }
 
+    /// [`CpuBackend::traverse_all`] compiled as in [`CpuBackend::trace_band_wide`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn traverse_all_wide(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        self.traverse_all::<true>(o, d, window)
+    }
+
     /// [`CpuBackend::trace_band`] compiled for newer x86-64 CPUs, as Embree picks its kernels at
     /// run time. The traversal counts and finds bits per node (one instruction each with POPCNT and
     /// LZCNT, a dozen without); the arithmetic is the same operations (Rust never fuses a
@@ -631,7 +707,143 @@ impl CpuBackend {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn trace_band_wide(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
-        self.trace_band::<true>(o, face, row0, ids, state)
+        if self.packets {
+            self.trace_band_packets(o, face, row0, ids, state)
+        } else {
+            self.trace_band::<true>(o, face, row0, ids, state)
+        }
+    }
+
+    /// [`CpuBackend::trace_band`] by packets: each tile in blocks of [`packet::PACKET_COLS`]
+    /// columns of `LANES / PACKET_COLS` rows, one [`CpuBackend::trace_packet`] each (partial
+    /// blocks at the image's edges).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn trace_band_packets(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+        use packet::{LANES, PACKET_COLS};
+        let r = self.cube.resolution() as usize;
+        let rows = ids.len() / r;
+        state.packet.last.clear();
+        for col0 in (0..r).step_by(TILE) {
+            let col1 = (col0 + TILE).min(r);
+            for pr in (0..rows).step_by(LANES / PACKET_COLS) {
+                for pc in (col0..col1).step_by(PACKET_COLS) {
+                    let texel = |l: usize| (pr + l / PACKET_COLS, pc + l % PACKET_COLS);
+                    let mut dirs = [Vec3A::ZERO; LANES];
+                    let mut lanes = 0u32;
+                    for (l, dir) in dirs.iter_mut().enumerate() {
+                        let (row, col) = texel(l);
+                        if row < rows && col < col1 {
+                            *dir = self.cube.texel_direction(face, (row0 + row) as u32, col as u32).into();
+                            lanes |= 1 << l;
+                        }
+                    }
+                    let lane_ids = self.trace_packet(&packet::Packet::new(o, &dirs, lanes), state);
+                    for (l, id) in lane_ids.iter().enumerate().filter(|&(l, _)| lanes & (1 << l) != 0) {
+                        let (row, col) = texel(l);
+                        ids[row * r + col] = *id;
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`CpuBackend::trace_fast`] for the lanes of a packet together: the previous packet's
+    /// winning triangles bound each lane from the start, one packet traversal finds every lane's
+    /// hits inside its bound, and a lane whose bound the traversal did not confirm (a hit it
+    /// cannot reach, see `trace_fast`) is traced again alone without it.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn trace_packet(&self, p: &packet::Packet, state: &mut TexelState) -> [u32; packet::LANES] {
+        use packet::LANES;
+        let ps = &mut state.packet;
+        let mut hint_t = [f32::INFINITY; LANES];
+        for &(ii, i) in &ps.last {
+            let inst = &self.instances[ii as usize];
+            let q = self.instance_packet(inst, p);
+            let tri = &self.blases[inst.blas as usize].triangles[i as usize];
+            let (hits, t, _) = packet::intersect_triangle(tri, &q, self.near, packet::splat(f32::INFINITY), p.lanes);
+            let t = packet::store(t);
+            for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
+                hint_t[l] = hint_t[l].min(t[l]);
+            }
+        }
+        ps.windows.reset(hint_t.map(|t| t * (1.0 + TIE_EPSILON)));
+        let PacketState { windows, last, winners, tlas_stack, blas_stack } = ps;
+        match &self.tlas {
+            None => {}
+            Some(_) if self.instances.len() == 1 => self.traverse_blas_packet(0, p, p.lanes, blas_stack, windows),
+            Some(tlas) => packet::traverse(tlas, p, p.lanes, tlas_stack, windows, |w, ii, lanes| {
+                self.traverse_blas_packet(ii, p, lanes, blas_stack, w)
+            }),
+        }
+        let mut ids = [NO_OBJECT; LANES];
+        winners.clear();
+        for l in (0..LANES).filter(|l| p.lanes & (1 << l) != 0) {
+            let window = &mut windows.windows[l];
+            if window.t_near > hint_t[l] {
+                window.clear();
+                // SAFETY: AVX2 and the rest of `wide_instructions` are present (the only caller
+                // is `trace_band_wide`).
+                unsafe { self.traverse_all_wide(p.origin, p.dirs[l], window) };
+            }
+            if let Some(h) = window.winner()
+                && !winners.contains(&(h.instance, h.tri))
+            {
+                winners.push((h.instance, h.tri));
+            }
+            ids[l] = window.id();
+        }
+        // A packet of misses keeps the last hits: the next packet may well hit them.
+        if !winners.is_empty() {
+            std::mem::swap(last, winners);
+        }
+        ids
+    }
+
+    /// Adds to each lane's window the hits of instance `ii`'s BLAS nearer than its bound.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn traverse_blas_packet(
+        &self,
+        ii: usize,
+        p: &packet::Packet,
+        lanes: u32,
+        stack: &mut Vec<(u32, u32)>,
+        windows: &mut LaneWindows,
+    ) {
+        use packet::{LANES, LaneBounds};
+        let inst = &self.instances[ii];
+        let blas = &self.blases[inst.blas as usize];
+        let q = self.instance_packet(inst, p);
+        packet::traverse(&blas.bvh, &q, lanes, stack, windows, |w, i, m| {
+            let tmax = packet::load(w.tmax());
+            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], &q, self.near, tmax, m);
+            if hits != 0 {
+                let t = packet::store(t);
+                for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
+                    w.add(l, blas.hit(inst, ii, i, t[l], back & (1 << l) != 0));
+                }
+            }
+        });
+    }
+
+    /// The packet of `inst`'s BLAS: `p`, or carried into model space lane by lane as
+    /// [`CpuBackend::instance_ray`] carries one ray.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> packet::Packet {
+        match &inst.to_model {
+            None => *p,
+            Some(m) => {
+                let dirs = p.dirs.map(|d| m.transform_vector3a(d));
+                packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes)
+            }
+        }
     }
 }
 

@@ -62,13 +62,15 @@ def main():
 
     n = len(points)
     ms_embree = 1e3 * total / n
-    ms_fast, ms_ref = meta["ms_per_point_fast"], meta["ms_per_point_reference"]
+    ms_fast, ms_ref, ms_per_ray = meta["ms_per_point_fast"], meta["ms_per_point_reference"], meta["ms_per_point_per_ray"]
     print(f"{n} points, R = {meta['resolution']}, {meta['triangles']} triangles, {rays} rays per point, one thread each")
-    print(f"embree (embreex rtcIntersect1): {ms_embree:.2f} ms CPU per point, {rays / ms_embree / 1e3:.2f} M rays/s "
+    print(f"embree (embreex rtcIntersect1):      {ms_embree:.2f} ms CPU per point, {rays / ms_embree / 1e3:.2f} M rays/s "
           f"(wall {1e3 * total_wall / n:.2f} ms)")
-    print(f"hdov reference tracer:          {ms_ref:.2f} ms CPU per point, {rays / ms_ref / 1e3:.2f} M rays/s")
-    print(f"hdov render_ids (fast path):    {ms_fast:.2f} ms CPU per point, {rays / ms_fast / 1e3:.2f} M rays/s")
-    print(f"ratio hdov/embree time per ray: reference {ms_ref / ms_embree:.3f}, fast {ms_fast / ms_embree:.3f}")
+    print(f"hdov reference tracer:               {ms_ref:.2f} ms CPU per point, {rays / ms_ref / 1e3:.2f} M rays/s")
+    print(f"hdov render_ids, one ray at a time:  {ms_per_ray:.2f} ms CPU per point, {rays / ms_per_ray / 1e3:.2f} M rays/s")
+    print(f"hdov render_ids, 4 × 4 ray packets: {ms_fast:.2f} ms CPU per point, {rays / ms_fast / 1e3:.2f} M rays/s")
+    print(f"ratio hdov/embree time per ray: reference {ms_ref / ms_embree:.3f}, one ray at a time "
+          f"{ms_per_ray / ms_embree:.3f}, packets {ms_fast / ms_embree:.3f}")
     print(f"hit objects differing: {differ} of {n * rays} texels ({100 * differ / (n * rays):.4f} %), "
           f"{differ_near} of them Embree hits nearer than near = {near:.4g}; hdov hit {hdov_hits} texels")
 

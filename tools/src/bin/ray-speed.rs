@@ -3,9 +3,11 @@
 //!
 //! Sample points: the corners of an X × Y × Z cell grid over the region a build would use
 //! (`ViewGrid::resolve`, default 8 × 1 × 8 = 162 corners). At each point, on this one thread:
-//! `render_ids_reference` (one `trace` per texel: the straightforward tracer) and `render_ids` (the
-//! fast path, in a 1-thread rayon pool); the two id cubes must be equal. Times are the process's
-//! CPU time (one thread busy at a time), steadier than the wall clock on a shared machine.
+//! `render_ids_reference` (one `trace` per texel: the straightforward tracer), and `render_ids` (the
+//! fast path, in a 1-thread rayon pool) twice: one ray at a time (`set_packets(false)`, the
+//! previous fast path) and by packets of 4 × 4 rays (the default); each id cube must equal the
+//! reference's. Times are the process's CPU time (one thread busy at a time), steadier than the
+//! wall clock on a shared machine.
 //!
 //! Writes into OUT_DIR: `triangles.f32` (world triangles, 9 f32 each, the order of
 //! `world_triangles`), `objects.u32` (each triangle's object), `points.f32` (3 f32 per point),
@@ -59,27 +61,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let mut ids_file = std::io::BufWriter::new(std::fs::File::create(out_dir.join("ids.u32"))?);
-    let (mut reference, mut fast) = (IdCube::new(r), IdCube::new(r));
-    // CPU time of this process (the one busy thread), and wall time beside it.
-    let (mut t_reference, mut t_fast) = (Duration::ZERO, Duration::ZERO);
-    let (mut wall_reference, mut wall_fast) = (Duration::ZERO, Duration::ZERO);
+    let (mut reference, mut per_ray, mut fast) = (IdCube::new(r), IdCube::new(r), IdCube::new(r));
+    // CPU time of this process (the one busy thread), and wall time beside it, per tracer.
+    let (mut t_reference, mut t_per_ray, mut t_fast) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
+    let (mut wall_reference, mut wall_per_ray, mut wall_fast) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
     let (mut differing, mut ties) = (0usize, 0usize);
     for &p in &points {
         let (t, c) = (Instant::now(), process_cpu_time());
         backend.render_ids_reference(p, &mut reference)?;
         (wall_reference, t_reference) = (wall_reference + t.elapsed(), t_reference + (process_cpu_time() - c));
+        backend.set_packets(false);
+        let (t, c) = (Instant::now(), process_cpu_time());
+        pool.install(|| backend.render_ids(p, &mut per_ray))?;
+        (wall_per_ray, t_per_ray) = (wall_per_ray + t.elapsed(), t_per_ray + (process_cpu_time() - c));
+        backend.set_packets(true);
         let (t, c) = (Instant::now(), process_cpu_time());
         pool.install(|| backend.render_ids(p, &mut fast))?;
         (wall_fast, t_fast) = (wall_fast + t.elapsed(), t_fast + (process_cpu_time() - c));
         // A difference is allowed only on a tie up to rounding: both ids among the surfaces at
         // the nearest depth (`CpuBackend::surfaces_at_nearest`).
-        for (i, (a, b)) in reference.ids.iter().zip(&fast.ids).enumerate().filter(|(_, (a, b))| a != b) {
-            let (f, row, col) = (i / (r * r) as usize, (i / r as usize) % r as usize, i % r as usize);
-            let tied = backend.surfaces_at_nearest(p, cube.texel_direction(f, row as u32, col as u32));
-            if tied.len() >= 2 && tied.contains(a) && tied.contains(b) {
-                ties += 1;
-            } else {
-                differing += 1;
+        for cube_ids in [&per_ray, &fast] {
+            for (i, (a, b)) in reference.ids.iter().zip(&cube_ids.ids).enumerate().filter(|(_, (a, b))| a != b) {
+                let (f, row, col) = (i / (r * r) as usize, (i / r as usize) % r as usize, i % r as usize);
+                let tied = backend.surfaces_at_nearest(p, cube.texel_direction(f, row as u32, col as u32));
+                if tied.len() >= 2 && tied.contains(a) && tied.contains(b) {
+                    ties += 1;
+                } else {
+                    differing += 1;
+                }
             }
         }
         ids_file.write_all(&fast.ids.iter().flat_map(|id| id.to_le_bytes()).collect::<Vec<_>>())?;
@@ -89,7 +98,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n = points.len() as f64;
     let rays = 6.0 * f64::from(r) * f64::from(r);
     let ms = |d: Duration| d.as_secs_f64() * 1e3 / n;
-    let (ms_reference, ms_fast) = (ms(t_reference), ms(t_fast));
+    let (ms_reference, ms_per_ray, ms_fast) = (ms(t_reference), ms(t_per_ray), ms(t_fast));
     let speed = |label: &str, cpu_ms: f64, wall: Duration| {
         let wall_ms = ms(wall);
         println!(
@@ -98,14 +107,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     };
     speed("reference tracer", ms_reference, wall_reference);
-    speed("fast render_ids ", ms_fast, wall_fast);
+    speed("render_ids, one ray at a time", ms_per_ray, wall_per_ray);
+    speed("render_ids, packets of 4 × 4 rays", ms_fast, wall_fast);
     println!(
-        "texels differing between the two: {differing} of {} (and {ties} ties up to rounding, answered by another of the tied surfaces)",
+        "texels differing from the reference, both fast routes: {differing} of 2 × {} (and {ties} ties up to rounding, answered by another of the tied surfaces)",
         rays as usize * points.len()
     );
     let json = format!(
         "{{\"resolution\": {r}, \"near\": {}, \"points\": {}, \"triangles\": {}, \"ms_per_point_reference\": {ms_reference}, \
-         \"ms_per_point_fast\": {ms_fast}, \"texels_differing\": {differing}}}\n",
+         \"ms_per_point_per_ray\": {ms_per_ray}, \"ms_per_point_fast\": {ms_fast}, \"texels_differing\": {differing}}}\n",
         backend.near(),
         points.len(),
         triangles.len()
