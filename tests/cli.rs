@@ -47,6 +47,60 @@ fn generate_build_info_round_trip() {
     assert!(hdov(&["info", db.to_str().unwrap()]).status.success());
 }
 
+/// `--samples probe` builds with both backends (the GPU backend's rays by a CPU backend of the
+/// scene), records the sampler and its default floor (box alone) in the manifest, and, without
+/// floors, answers with every object a corner-only build answers with (it only adds points).
+#[test]
+fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
+    let tmp = tempfile::tempdir().unwrap();
+    let city = tmp.path().join("city");
+    assert!(hdov(&["generate", "city", "--scale", "tiny", "--out", city.to_str().unwrap()]).status.success());
+    let scene = city.join("city.json");
+    let db = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let build = |name: &str, args: &[&str]| -> serde_json::Value {
+        let o = hdov(&[&["build", scene.to_str().unwrap(), "--out", &db(name), "--resolution", "32"], args].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice(&std::fs::read(tmp.path().join(name).join("manifest.json")).unwrap()).unwrap()
+    };
+    let probed = build("probed", &["--backend", "cpu", "--samples", "probe:8:2"]);
+    assert_eq!(probed["build"]["visibility"]["probe"], "probe:8:2");
+    assert_eq!(probed["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box"]));
+    let bare = ["--backend", "cpu", "--zero-dov-floor", "none"];
+    let corners = build("corners", &bare);
+    assert!(corners["build"]["visibility"].get("probe").is_none());
+    build("probed-bare", &[&bare[..], &["--samples", "probe:8:2"]].concat());
+    let objects = |name: &str, at: &str| -> std::collections::BTreeSet<u64> {
+        let o = hdov(&["query", &db(name), "--at", at, "--eta", "0", "--mode", "naive", "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let a: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        a["items"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|i| i["kind"] == "object")
+            .map(|i| i["id"].as_u64().unwrap())
+            .collect()
+    };
+    let r = &corners["grid"]["region"];
+    let (lo, hi) = (&r["min"], &r["max"]);
+    let mut more = 0;
+    for k in 0..6 {
+        let f = |a: usize| {
+            let (l, h) = (lo[a].as_f64().unwrap(), hi[a].as_f64().unwrap());
+            l + (h - l) * (k as f64 + 0.5) / 6.0
+        };
+        let at = format!("{},{},{}", f(0), f(1), f(2));
+        let (c, p) = (objects("corners", &at), objects("probed-bare", &at));
+        assert!(c.is_subset(&p), "at {at}: corners see {:?} that probing lost", c.difference(&p).collect::<Vec<_>>());
+        more += p.len() - c.len();
+    }
+    eprintln!("probing added {more} objects over 6 cells");
+    if hdov::dov::gpu::adapter_or_skip() {
+        let gpu = build("gpu", &["--backend", "gpu", "--samples", "probe:8:2"]);
+        assert_eq!(gpu["build"]["visibility"]["probe"], "probe:8:2");
+    }
+}
+
 /// `--force` replaces an hdov database or an empty folder, and nothing else: a user's folder,
 /// a file, or the scene's own folder is refused in one line and left as it was.
 #[test]
@@ -133,6 +187,8 @@ fn out_of_bounds_arguments_are_refused_before_any_work() {
         (&["--samples", "adaptive:0:4"], "--samples"),
         (&["--samples", "adaptive:2:5000"], "--samples"),
         (&["--grid", "2000x1x2000", "--samples", "adaptive:2:64"], "--samples"),
+        (&["--samples", "probe:0:4"], "--samples"),
+        (&["--samples", "probe:4"], "--samples"),
         (&["--resolution", "0"], "--resolution"),
         (&["--resolution", "1000000"], "--resolution"),
         (&["--page-size", "50"], "--page-size"),

@@ -289,6 +289,7 @@ mod tests {
                 zero_dov_floor: vec![FloorTest::BoxWithin(2.5), FloorTest::NeighbourCorners],
                 dov_codec: DovCodec::LogU16,
                 adaptive: Some(AdaptiveSampling { seeds: 3, budget: 24 }),
+                probe: Some(RayProbing { points: 16, rays: 2 }),
                 ..Default::default()
             }),
             ..Default::default()
@@ -300,6 +301,7 @@ mod tests {
         assert_eq!(v["shard"], serde_json::json!([1, 3]));
         assert_eq!(v["dov_codec"], "log-u16");
         assert_eq!(v["adaptive"], "adaptive:3:24");
+        assert_eq!(v["probe"], "probe:16:2");
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
     }
 
@@ -307,10 +309,14 @@ mod tests {
     fn manifests_without_adaptive_sampling_read_and_write_unchanged() {
         let json = serde_json::to_value(BuildParams::default()).unwrap();
         assert!(json["visibility"].get("adaptive").is_none());
+        assert!(json["visibility"].get("probe").is_none());
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap().visibility.unwrap().adaptive, None);
         let mut json = serde_json::to_value(BuildParams::default()).unwrap();
         json["visibility"]["adaptive"] = serde_json::json!("adaptive:0:3");
         assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("SEEDS"));
+        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
+        json["visibility"]["probe"] = serde_json::json!("probe:0:3");
+        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("POINTS"));
     }
 
     #[test]

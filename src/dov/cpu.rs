@@ -587,11 +587,27 @@ impl DovBackend for CpuBackend {
 }
 
 impl RayCaster for CpuBackend {
-    /// [`CpuBackend::trace_within`] with `dir` scaled so that its largest component is ±1, the
-    /// texel directions' convention, so that the near plane means the same distance.
+    /// [`CpuBackend::trace_within`]'s id by the fast path's traversal (the AVX2 build where the
+    /// CPU has it), `dir` scaled so that its largest component is ±1, the texel directions'
+    /// convention, so that the near plane means the same distance.
     fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32 {
+        thread_local! {
+            static WINDOW: std::cell::RefCell<TieWindow> = std::cell::RefCell::new(TieWindow::default());
+        }
         let scale = dir.abs().max_element();
-        self.trace_within(origin, dir / scale, reach * scale)
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir / scale));
+        WINDOW.with_borrow_mut(|window| {
+            window.clear();
+            window.bound = reach * scale;
+            #[cfg(target_arch = "x86_64")]
+            if self.wide {
+                // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+                unsafe { self.traverse_all_wide(o, d, window) };
+                return window.id();
+            }
+            self.traverse_all::<false>(o, d, window);
+            window.id()
+        })
     }
 
     fn targets(&self) -> &SurfaceTargets {
