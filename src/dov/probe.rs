@@ -8,9 +8,11 @@
 //! from `points` well-spread points of the cell towards points spread over the candidate's surface
 //! ([`SurfaceTargets`]), `rays` per point, until one meets the candidate first: it is then seen,
 //! from that point, for certain. Any other unseen object such a ray meets first is seen too. A
-//! seen object's DoV from its finding point is measured on the cube map's own texels, only those
-//! whose centre ray enters the object's box (its *footprint*), so it is the DoV a whole cube map
-//! at that point would give that object.
+//! seen object's DoV is measured at the probe point whose rays meet it most, on the cube map's own
+//! texels there, only those whose centre ray enters the object's box (its *footprint*), so it is
+//! the DoV a whole cube map at that point would give that object. Each probe point's findings
+//! become a partial point view ([`CellProbe::points`]) that the cell's DoV takes its max over,
+//! like any measured point's.
 //!
 //! Cost: at most candidates × `points` × `rays` rays plus the footprints of what is found, against
 //! 6·R² rays per cube map; a candidate hidden from the whole cell costs all its rays (nothing
