@@ -18,7 +18,8 @@
 //! Dense truth ([`dense_cells`]): per cell, the 8 corners and DENSE (default 64) Halton points
 //! from 1001 on (bases 2, 3, 5): a different part of the sequence from the samplers' points 1…,
 //! so that no sampler point coincides with a truth point. Points inside geometry are left out as
-//! in the build. Misses are also counted among pairs whose dense DoV is ≥ 4 centre texels.
+//! in the build. Misses are also counted among pairs whose dense DoV is ≥ 4 centre texels. With
+//! `HDOV_AUDIT_MISSES=1` the tool also prints every missed pair and the misses by size.
 
 #[path = "../../../tests/dov_common/mod.rs"]
 mod dov_common;
