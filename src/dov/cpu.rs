@@ -395,16 +395,10 @@ impl CpuBackend {
     /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
     /// enters before its nearest hit's tie window.
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
-        self.trace_within(origin, dir, f32::INFINITY)
-    }
-
-    /// [`CpuBackend::trace`] among the hits with `t ≤ tmax` only ([`NO_OBJECT`] if none).
-    pub fn trace_within(&self, origin: Vec3, dir: Vec3, tmax: f32) -> u32 {
         let mut window = TieWindow::default();
         window.clear();
-        window.bound = tmax;
         // Boxes beyond the tie window of the nearest hit cannot change the result.
-        self.traverse_plainly(origin, dir, tmax, |hit| {
+        self.traverse_plainly(origin, dir, |hit| {
             window.add(hit);
             window.bound
         });
@@ -413,11 +407,11 @@ impl CpuBackend {
 
     /// One plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray enters
     /// before the bound: `on_hit` takes each hit and returns the new bound.
-    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, tmax: f32, mut on_hit: impl FnMut(Hit) -> f32) {
+    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, mut on_hit: impl FnMut(Hit) -> f32) {
         let Some(tlas) = &self.tlas else { return };
         let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
-        let mut bound = tmax;
-        tlas.ray_traverse(Ray::new(o, d, self.near, tmax), &mut RayHit::none(), |_, ii| {
+        let mut bound = f32::INFINITY;
+        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
             let inst = &self.instances[ii];
             let blas = &self.blases[inst.blas as usize];
             let ray = self.instance_ray(inst, o, d, bound);
@@ -438,7 +432,7 @@ impl CpuBackend {
     /// the fast path's early culling may pick another of them than the reference tracer (tests).
     pub fn surfaces_at_nearest(&self, origin: Vec3, dir: Vec3) -> Vec<u32> {
         let mut hits: Vec<Hit> = Vec::new();
-        self.traverse_plainly(origin, dir, f32::INFINITY, |hit| {
+        self.traverse_plainly(origin, dir, |hit| {
             hits.push(hit);
             f32::INFINITY
         });
@@ -587,9 +581,9 @@ impl DovBackend for CpuBackend {
 }
 
 impl RayCaster for CpuBackend {
-    /// [`CpuBackend::trace_within`]'s id by the fast path's traversal (the AVX2 build where the
-    /// CPU has it), `dir` scaled so that its largest component is ±1, the texel directions'
-    /// convention, so that the near plane means the same distance.
+    /// [`CpuBackend::trace`]'s id among the hits within `reach`, by the fast path's traversal
+    /// (the AVX2 build where the CPU has it), `dir` scaled so that its largest component is ±1,
+    /// the texel directions' convention, so that the near plane means the same distance.
     fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32 {
         thread_local! {
             static WINDOW: std::cell::RefCell<TieWindow> = std::cell::RefCell::new(TieWindow::default());
