@@ -181,6 +181,25 @@ impl Gpu {
 
     /// A 2D render target of `format` that can be copied out.
     pub fn target(&self, label: &str, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        self.texture_2d(label, width, height, format, usage)
+    }
+
+    /// A reverse-Z depth buffer (`Depth32Float`, see [`reverse_z_depth`]) of `width × height`.
+    pub fn depth_buffer(&self, label: &str, width: u32, height: u32) -> wgpu::Texture {
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        self.texture_2d(label, width, height, wgpu::TextureFormat::Depth32Float, usage)
+    }
+
+    /// One single-sampled 2D texture without mip levels.
+    fn texture_2d(
+        &self,
+        label: &str,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> wgpu::Texture {
         self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -188,21 +207,7 @@ impl Gpu {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        })
-    }
-
-    /// A reverse-Z depth buffer (`Depth32Float`, see [`reverse_z_depth`]) of `width × height`.
-    pub fn depth_buffer(&self, label: &str, width: u32, height: u32) -> wgpu::Texture {
-        self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            usage,
             view_formats: &[],
         })
     }
