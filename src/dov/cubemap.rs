@@ -47,6 +47,13 @@ pub fn face_basis(face: usize) -> FaceBasis {
     FaceBasis { right: forward.cross(up), up, forward }
 }
 
+/// The direction through `(u, v)` of face `face`, `forward + u·right + v·up` (its `forward`
+/// component is 1): texel centres, and any point inside a texel.
+pub fn uv_direction(face: usize, u: f64, v: f64) -> Vec3 {
+    let b = face_basis(face);
+    b.forward + b.right * u as f32 + b.up * v as f32
+}
+
 /// The cube map of one resolution: texel coordinates and weights, computed once.
 #[derive(Clone, Debug)]
 pub struct CubeMap {
@@ -96,9 +103,8 @@ impl CubeMap {
 
     /// Direction through the centre of texel (face, row, col); its `forward` component is 1.
     pub fn texel_direction(&self, face: usize, row: u32, col: u32) -> Vec3 {
-        let b = face_basis(face);
         let (u, v) = self.texel_uv(row, col);
-        b.forward + b.right * u as f32 + b.up * v as f32
+        uv_direction(face, u, v)
     }
 
     /// Solid angle (steradians) of texel (row, col) of any face: `(2/R)² / (1+u²+v²)^{3/2}`.

@@ -27,7 +27,7 @@ use std::collections::HashMap;
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
-use super::cubemap::{FACE_COUNT, face_basis};
+use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
 use super::precompute::halton3;
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
 use crate::geom::Aabb;
@@ -339,7 +339,7 @@ fn footprint_sum(rays: &dyn RayCaster, cube: &CubeMap, p: Vec3, object: u32, b: 
                 let (u, v) = cube.texel_uv(row, col);
                 for dv in &offsets {
                     for du in &offsets {
-                        let d = basis.forward + basis.right * (u + du) as f32 + basis.up * (v - dv) as f32;
+                        let d = uv_direction(face, u + du, v - dv);
                         let Some(exit) = box_exit(p, d, b) else { continue };
                         cast += 1;
                         // Nothing beyond the box can be the object.
