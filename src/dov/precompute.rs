@@ -348,15 +348,14 @@ pub fn precompute_shard(
     } else {
         u32::from(options.uses_neighbours() || options.adaptive.is_some())
     };
-    let rays = match options.probe {
-        None => None,
-        Some(p) => Some(backend.ray_caster().map(|_| p).ok_or_else(|| {
-            Error::bad_param(
-                "samples",
-                format!("{p} casts single rays: the {} backend has none (use the cpu backend)", backend.name()),
-            )
-        })?),
-    };
+    if let Some(p) = options.probe
+        && backend.ray_caster().is_none()
+    {
+        return Err(Error::bad_param(
+            "samples",
+            format!("{p} casts single rays: the {} backend has none (use the cpu backend)", backend.name()),
+        ));
+    }
     let corners_of = |coords: [u32; 3]| neighbourhood_corners(grid, coords, ring);
     // How many shard cells still need each corner: drop a corner's DoV after its last cell.
     let mut corner_uses: HashMap<usize, u32> = HashMap::new();
@@ -409,13 +408,13 @@ pub fn precompute_shard(
             })?;
             interior.extend(extra);
         }
-        if let (Some(probing), Some(caster)) = (&rays, backend.ray_caster()) {
-            let measured: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
-            let seen = seen_by(measured.into_iter());
+        if let (Some(probing), Some(caster)) = (&options.probe, backend.ray_caster()) {
+            let seen = seen_by(own.iter().map(|c| &corner_dov[c]).chain(&interior));
             let mut candidates = seen_by(needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]));
             candidates
                 .extend((0..object_bounds.len() as u32).filter(|&o| object_bounds[o as usize].intersects(&cell_box)));
-            let mut candidates: Vec<u32> = candidates.into_iter().filter(|o| !seen.contains(o)).collect();
+            // probe_cell skips the seen ones.
+            let mut candidates: Vec<u32> = candidates.into_iter().collect();
             candidates.sort_unstable();
             let probe = probe_cell(caster, &cube, &cell_box, &seen, &candidates, object_bounds, probing);
             out.probe_rays += probe.rays;
