@@ -225,17 +225,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut corner_time = None;
     for sampler in samplers {
+        let options = sampler.options();
         let (t, cpu) = (Instant::now(), hdov_tools::process_cpu_time());
         // The whole grid, as a build measures it (corners shared by all their cells); compared on
         // the truth's cells.
-        let out =
-            precompute_shard(&mut backend, &grid, &bounds, &shape, &sampler.options(), Shard::ALL, &mut |_, _| {})?;
+        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {})?;
         let all_cells = out.cells.len() as f64;
         let secs = t.elapsed().as_secs_f64();
         let cpu = (hdov_tools::process_cpu_time() - cpu).as_secs_f64();
         // CPU time: steadier than the wall clock on a shared machine.
         let base = *corner_time.get_or_insert(cpu);
-        let c = compare(&truth, &out.cells[cells.clone()], &cube, !sampler.options().zero_dov_tests.is_empty());
+        let c = compare(&truth, &out.cells[cells.clone()], &cube, !options.zero_dov_tests.is_empty());
         let pct = |n: usize| 100.0 * n as f64 / c.truth_pairs.max(1) as f64;
         println!(
             "| {} | {:.2} | {:.0} + {:.0} | {secs:.1} | {cpu:.1} | {:.2}× | {} ({:.2} %) | {:.3} % | {} ({:.2} %) | {} ({:.2} %) | {} ({:.1} %) | {:.2} % | {:.1} | {} |",
