@@ -20,13 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let b = scene.bounds();
     let mut ids = IdCube::new(128);
     let mut points = 0;
-    let cpu_seconds = || {
-        let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-        let fields: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
-        let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok()).unwrap_or(0.0);
-        (ticks(11) + ticks(12)) / 100.0
-    };
-    let c1 = cpu_seconds();
+    let c1 = hdov_tools::process_cpu_time().as_secs_f64();
     let t1 = std::time::Instant::now();
     let mut checksum = 0u64;
     let mut dump = Vec::new();
@@ -43,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let per_point = t1.elapsed() / points;
-    let cpu_per_point = (cpu_seconds() - c1) / points as f64;
+    let cpu_per_point = (hdov_tools::process_cpu_time().as_secs_f64() - c1) / points as f64;
     if let Some(out) = dump_to {
         std::fs::write(out, dump)?;
     }

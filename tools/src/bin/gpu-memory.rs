@@ -85,7 +85,7 @@ fn report(name: &str, scene: &Scene, points: usize, r: u32) -> Result<(), Box<dy
         }
         backend.render_ids(at[0], &mut ids)?; // warm-up: pipeline compilation
         let (draws, triangles) = (backend.draw_commands(), backend.triangles_drawn());
-        let (t, cpu) = (Instant::now(), cpu_seconds());
+        let (t, cpu) = (Instant::now(), hdov_tools::process_cpu_time().as_secs_f64());
         for &p in &at {
             backend.render_ids(p, &mut ids)?;
         }
@@ -93,7 +93,7 @@ fn report(name: &str, scene: &Scene, points: usize, r: u32) -> Result<(), Box<dy
         println!(
             "{label}: {:.3} s per sample point at R = {r} ({:.3} s of CPU time, all threads), {:.0} draw commands and {:.0} triangles per point ({} points)",
             t.elapsed().as_secs_f64() / n,
-            (cpu_seconds() - cpu) / n,
+            (hdov_tools::process_cpu_time().as_secs_f64() - cpu) / n,
             (backend.draw_commands() - draws) as f64 / n,
             (backend.triangles_drawn() - triangles) as f64 / n,
             at.len()
@@ -104,16 +104,6 @@ fn report(name: &str, scene: &Scene, points: usize, r: u32) -> Result<(), Box<dy
         grid.corner_count() as f64 / grid.cell_count() as f64
     );
     Ok(())
-}
-
-/// User + system CPU time of this process, all threads (lavapipe rasterises on its own), from
-/// /proc/self/stat in clock ticks of 1/100 s (0 where /proc is not there).
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let ticks: u64 = rest.split_whitespace().skip(11).take(2).filter_map(|f| f.parse::<u64>().ok()).sum();
-    ticks as f64 / 100.0
 }
 
 /// VmHWM of this process (0 where /proc is not there).
