@@ -13,7 +13,10 @@
 //! grid, as a build does, so their costs per cell are a whole build's. SAMPLERS: comma-separated
 //! `corners`, `neighbours` (corners + the neighbour floor), K (interior points),
 //! `adaptive[:SEEDS:BUDGET]` or `probe[:POINTS:RAYS]` (without floor tests: its entries at the
-//! floor DoV are objects a ray saw, thinner than a texel, and count as found).
+//! floor DoV are objects a ray saw, thinner than a texel, and count as found). A sampler written
+//! `NAME@shard` runs on SHARD's cells only (and the corners their candidates need), for dense rows
+//! too costly on the whole grid, such as `64@shard`: the truth's own method at other points, which
+//! measures how far the truth is from agreeing with itself. Its CPU time is compared per cell.
 //!
 //! Dense truth ([`dense_cells`]): per cell, the 8 corners and DENSE (default 64) Halton points
 //! from 1001 on (bases 2, 3, 5): a different part of the sequence from the samplers' points 1…,
@@ -185,11 +188,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let r: u32 = args.get(1).map(|s| s.parse()).transpose()?.unwrap_or(64);
     let shard: Shard = args.get(2).map_or(Ok(Shard::ALL), |s| s.parse())?;
     let dense: u32 = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(64);
-    let samplers: Vec<Sampler> = args
+    // Each sampler, and whether it runs on SHARD's cells only.
+    let samplers: Vec<(Sampler, bool)> = args
         .get(4)
         .map_or("corners,neighbours,4,16,adaptive", String::as_str)
         .split(',')
-        .map(Sampler::parse)
+        .map(|s| match s.strip_suffix("@shard") {
+            Some(s) => Sampler::parse(s).map(|x| (x, true)),
+            None => Sampler::parse(s).map(|x| (x, false)),
+        })
         .collect::<Result<_, _>>()?;
     let (scene, grid) = match scene_name {
         "audit" => (
@@ -224,26 +231,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut corner_time = None;
-    for sampler in samplers {
+    for (sampler, on_shard) in samplers {
         let options = sampler.options();
         let (t, cpu) = (Instant::now(), hdov_tools::process_cpu_time());
-        // The whole grid, as a build measures it (corners shared by all their cells); compared on
-        // the truth's cells.
-        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {})?;
+        // The whole grid, as a build measures it (corners shared by all their cells), unless
+        // `@shard`; compared on the truth's cells.
+        let run_on = if on_shard { shard } else { Shard::ALL };
+        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, run_on, &mut |_, _| {})?;
         let all_cells = out.cells.len() as f64;
         let secs = t.elapsed().as_secs_f64();
         let cpu = (hdov_tools::process_cpu_time() - cpu).as_secs_f64();
-        // CPU time: steadier than the wall clock on a shared machine.
-        let base = *corner_time.get_or_insert(cpu);
-        let c = compare(&truth, &out.cells[cells.clone()], &cube, !options.zero_dov_tests.is_empty());
+        // CPU time per cell: steadier than the wall clock on a shared machine.
+        let base = *corner_time.get_or_insert(cpu / all_cells);
+        let compared = if on_shard { &out.cells[..] } else { &out.cells[cells.clone()] };
+        let c = compare(&truth, compared, &cube, !options.zero_dov_tests.is_empty());
         let pct = |n: usize| 100.0 * n as f64 / c.truth_pairs.max(1) as f64;
         println!(
             "| {} | {:.2} | {:.0} + {:.0} | {secs:.1} | {cpu:.1} | {:.2}× | {} ({:.2} %) | {:.3} % | {} ({:.2} %) | {} ({:.2} %) | {} ({:.1} %) | {:.2} % | {:.1} | {} |",
-            sampler.name(),
+            sampler.name() + if on_shard { " (shard only)" } else { "" },
             out.points_measured as f64 / all_cells,
             out.probe_rays as f64 / all_cells,
             out.footprint_rays as f64 / all_cells,
-            cpu / base,
+            cpu / all_cells / base,
             c.missed,
             pct(c.missed),
             100.0 * c.missed_mass / c.truth_mass.max(f64::MIN_POSITIVE),
