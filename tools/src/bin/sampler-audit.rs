@@ -206,7 +206,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "fence" => fence_scene(r),
         "city" => {
             let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
-            let grid = scene.grid.clone().ok_or("the city brings a grid")?;
+            let grid = scene.grid.ok_or("the city brings a grid")?;
             (scene, grid)
         }
         other => return Err(format!("unknown scene '{other}': expected audit, fence or city").into()),
