@@ -976,7 +976,37 @@ mod tests {
         ]
     }
 
+    /// Boxes of many sizes around the origin.
+    fn boxes() -> Scene {
+        let mut s = Scene::default();
+        for k in 1..=30 {
+            let p = (super::super::precompute::halton3(k) - Vec3::splat(0.5)) * Vec3::new(12.0, 6.0, 12.0);
+            let size = Vec3::splat(0.05) + super::super::precompute::halton3(k + 100) * 2.0;
+            s.add_box(&format!("box {k}"), p, p + size);
+        }
+        s
+    }
+
     proptest! {
+        /// A probe ray's id (the AVX2 traversal where the CPU has it, its direction rescaled) is
+        /// the id of a plain traversal within its reach.
+        #[test]
+        fn first_hit_is_a_plain_traversal_within_reach(
+            rays in prop::collection::vec((vec3a(), vec3a(), prop_oneof![Just(f32::INFINITY), 0.1f32..10.0]), 1..40),
+        ) {
+            let scene = boxes();
+            let cpu = CpuBackend::new(&scene, 8).unwrap();
+            for (o, d, reach) in rays {
+                let scale = d.abs().max_element();
+                prop_assume!(scale > 0.0);
+                let mut plain = TieWindow::default();
+                plain.clear();
+                plain.bound = reach;
+                cpu.traverse_all::<false>(o, d / scale, &mut plain);
+                prop_assert_eq!(cpu.first_hit(o.into(), d.into(), reach / scale), plain.id());
+            }
+        }
+
         /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may
         /// then differ in nothing but the order in which they meet triangles.
         #[test]
