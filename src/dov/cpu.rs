@@ -978,10 +978,11 @@ mod tests {
 
     /// Boxes of many sizes around the origin.
     fn boxes() -> Scene {
+        use crate::dov::precompute::halton3;
         let mut s = Scene::default();
         for k in 1..=30 {
-            let p = (super::super::precompute::halton3(k) - Vec3::splat(0.5)) * Vec3::new(12.0, 6.0, 12.0);
-            let size = Vec3::splat(0.05) + super::super::precompute::halton3(k + 100) * 2.0;
+            let p = (halton3(k) - Vec3::splat(0.5)) * Vec3::new(12.0, 6.0, 12.0);
+            let size = Vec3::splat(0.05) + halton3(k + 100) * 2.0;
             s.add_box(&format!("box {k}"), p, p + size);
         }
         s
@@ -999,11 +1000,14 @@ mod tests {
             for (o, d, reach) in rays {
                 let scale = d.abs().max_element();
                 prop_assume!(scale > 0.0);
+                // The reach in lengths of `d`, and the bound it makes along `d / scale` (the same
+                // rounding as `first_hit`'s).
+                let reach = reach / scale;
                 let mut plain = TieWindow::default();
                 plain.clear();
-                plain.bound = reach;
+                plain.bound = reach * scale;
                 cpu.traverse_all::<false>(o, d / scale, &mut plain);
-                prop_assert_eq!(cpu.first_hit(o.into(), d.into(), reach / scale), plain.id());
+                prop_assert_eq!(cpu.first_hit(o.into(), d.into(), reach), plain.id());
             }
         }
 

@@ -193,9 +193,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .get(4)
         .map_or("corners,neighbours,4,16,adaptive", String::as_str)
         .split(',')
-        .map(|s| match s.strip_suffix("@shard") {
-            Some(s) => Sampler::parse(s).map(|x| (x, true)),
-            None => Sampler::parse(s).map(|x| (x, false)),
+        .map(|s| {
+            let (name, on_shard) = s.strip_suffix("@shard").map_or((s, false), |name| (name, true));
+            Sampler::parse(name).map(|x| (x, on_shard))
         })
         .collect::<Result<_, _>>()?;
     let (scene, grid) = match scene_name {
