@@ -22,8 +22,9 @@ pub enum Error {
     /// An error from the storage crate (pages, layouts).
     #[error(transparent)]
     Storage(#[from] hdov_storage::Error),
-    /// No graphics adapter could run the GPU backend.
-    #[error("gpu: {0}")]
+    /// No graphics adapter could run the GPU backend, or the graphics driver refused a request.
+    /// Shown on one line, however many lines wgpu's own report has.
+    #[error("gpu: {}", one_line(.0))]
     Gpu(String),
 }
 
@@ -38,5 +39,29 @@ impl Error {
     }
     pub fn bad_param(param: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::BadParam { param: param.into(), reason: reason.into() }
+    }
+}
+
+/// `text` on one line: its non-empty lines trimmed and joined with ": ", leaving out wgpu's
+/// "Caused by:" headings (a wgpu error is a heading, then its causes indented below it).
+pub fn one_line(text: &str) -> String {
+    let parts: Vec<&str> = text.lines().map(str::trim).filter(|l| !l.is_empty() && *l != "Caused by:").collect();
+    parts.join(": ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wgpu_report_reads_as_one_line() {
+        let report = "Validation Error\n\nCaused by:\n  In Device::create_render_pipeline, label = 'render'\n    Color state [2] is invalid\n      Format R32Float is not renderable\n";
+        let e = Error::Gpu(format!("llvmpipe on Gl: setting up the renderer: {report}"));
+        assert_eq!(
+            e.to_string(),
+            "gpu: llvmpipe on Gl: setting up the renderer: Validation Error: In Device::create_render_pipeline, \
+             label = 'render': Color state [2] is invalid: Format R32Float is not renderable"
+        );
+        assert_eq!(one_line("one line"), "one line");
     }
 }

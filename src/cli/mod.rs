@@ -98,7 +98,7 @@ fn user_message(e: &Error) -> String {
     match e {
         Error::BadParam { param, reason } => format!("{}: {reason}", flag_of(param)),
         Error::Storage(S::Exists { .. }) => format!("{e}; pass --force to replace it"),
-        _ => e.to_string(),
+        _ => hdov::error::one_line(&e.to_string()),
     }
 }
 

@@ -94,10 +94,41 @@ fn request_adapter() -> std::result::Result<wgpu::Adapter, wgpu::RequestAdapterE
         }
         pollster::block_on(wgpu::Instance::new(desc).request_adapter(&adapter_options()))
     };
+    quiet_wayland_log();
     if std::env::var_os("WGPU_BACKEND").is_some() {
         return request(None);
     }
     request(Some(wgpu::Backends::PRIMARY)).or_else(|_| request(Some(wgpu::Backends::GL)))
+}
+
+/// Silences libwayland-client's log in this process. Mesa's drivers probe for a Wayland
+/// display while wgpu asks them for adapters, and without `XDG_RUNTIME_DIR` (servers, CI,
+/// containers) libwayland prints `error: XDG_RUNTIME_DIR is invalid or not set in the
+/// environment.` on stderr, which reads as hdov failing. hdov draws offscreen and opens no
+/// window, so nothing it does needs that log. Loading the library (when present) and setting
+/// its client log handler once, before the first instance, keeps the probe quiet; the
+/// drivers' own failures still come back through wgpu (decision 72).
+fn quiet_wayland_log() {
+    #[cfg(target_os = "linux")]
+    {
+        static ONCE: std::sync::Once = std::sync::Once::new();
+        /// `wl_log_func_t`: `void (*)(const char *format, va_list args)`; the arguments are ignored.
+        unsafe extern "C" fn ignore(_format: *const std::ffi::c_char, _args: *mut std::ffi::c_void) {}
+        type SetHandler = unsafe extern "C" fn(unsafe extern "C" fn(*const std::ffi::c_char, *mut std::ffi::c_void));
+        ONCE.call_once(|| {
+            // SAFETY: loading libwayland-client runs no initialiser with preconditions, and
+            // `wl_log_set_handler_client` only stores the pointer to a function that lives for
+            // the whole process. The library is kept loaded (leaked) so that the handler stays
+            // set for the drivers, which share the same loaded copy.
+            unsafe {
+                let Ok(library) = libloading::Library::new("libwayland-client.so.0") else { return };
+                if let Ok(set) = library.get::<SetHandler>(b"wl_log_set_handler_client\0") {
+                    set(ignore);
+                }
+                std::mem::forget(library);
+            }
+        });
+    }
 }
 
 fn adapter_options() -> wgpu::RequestAdapterOptions<'static, 'static> {

@@ -302,7 +302,10 @@ struct ViewUniform {
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
-const DEPTH_OUT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// The view depth's target holds the f32's bits as a u32: 32-bit float colour targets are not
+/// renderable on every adapter (GL through Mesa's llvmpipe refuses R32Float), 32-bit integer
+/// ones are, and the bits read back are the same (docs/decisions.md, 71).
+const DEPTH_OUT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 
 /// The offscreen renderer: a device and a pipeline; each view uploads its geometry, draws it
 /// and reads the three targets back.
@@ -461,7 +464,7 @@ impl Renderer {
                 image.rgba.extend_from_slice(px);
             }
             image.ids.extend(rows(1).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
-            image.depth.extend(rows(2).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+            image.depth.extend(rows(2).map(|b| f32::from_bits(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))));
         })?;
         Ok(image)
     }

@@ -33,7 +33,8 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) id: u32, @location(2) 
 struct FragmentOut {
     @location(0) color: vec4<f32>,
     @location(1) id: u32,
-    @location(2) depth: f32,
+    // The f32 view depth's bits (a u32 target renders on every backend).
+    @location(2) depth: u32,
 };
 
 @fragment
@@ -47,6 +48,6 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     var out: FragmentOut;
     out.color = vec4<f32>(in.color.rgb * shade, 1.0);
     out.id = in.id;
-    out.depth = dot(in.rel, view.forward.xyz);
+    out.depth = bitcast<u32>(dot(in.rel, view.forward.xyz));
     return out;
 }
