@@ -41,10 +41,12 @@
 //! ```
 
 pub mod build;
+pub mod camera;
 pub mod city;
 pub mod db;
 pub mod dov;
 pub mod error;
+pub mod format;
 pub mod geom;
 pub mod gfx;
 pub mod grid;

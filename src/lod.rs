@@ -14,6 +14,7 @@ use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use crate::format::params::LodParams;
 use crate::geom::max_scale;
 use crate::rtree::RTree;
 use crate::scene::{Mesh, Scene};
@@ -29,20 +30,6 @@ pub struct LodLevel {
 impl LodLevel {
     pub fn faces(&self) -> usize {
         self.mesh.triangle_count()
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LodParams {
-    /// Target faces of a level / faces of the level before.
-    pub ratio: f32,
-    /// A chain stops once a level has at most this many faces.
-    pub min_faces: usize,
-}
-
-impl Default for LodParams {
-    fn default() -> Self {
-        Self { ratio: 0.5, min_faces: 32 }
     }
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::Mat4;
 use hdov::scene::{BaseMesh, Object, Scene};
 
-use hdov::db::TREE_FILE;
+use hdov::format::TREE_FILE;
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
 use hdov::{BuildParams, Database};
@@ -30,7 +30,7 @@ fn tree_pages_and_lods_round_trip() {
     build(&dir, &params);
     let scene = town(8);
     let boxes = scene.all_object_bounds();
-    let tree = RTree::build(&boxes, hdov::db::tree_page::fanout(256), TreeAlgorithm::Str);
+    let tree = RTree::build(&boxes, hdov::format::tree_page::fanout(256), TreeAlgorithm::Str);
     let db = Database::open(&dir).unwrap();
     assert_eq!(db.node_count() as usize, tree.nodes.len());
     assert!(tree.height() >= 3, "a 256-byte page makes a deep enough tree to test");

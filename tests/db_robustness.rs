@@ -15,9 +15,9 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use hdov::db::catalog::{Catalog, LodRef};
-use hdov::db::tree_page::NodePage;
 use hdov::dov::BackendKind;
+use hdov::format::catalog::{Catalog, LodRef};
+use hdov::format::tree_page::NodePage;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::progress::Progress;

@@ -29,7 +29,7 @@ fn fixture() -> Fixture {
     };
     hdov::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
     // The same measurement, independently: the tree is deterministic, so are its V-pages.
-    let tree = RTree::build(&scene.all_object_bounds(), hdov::db::tree_page::fanout(512), params.tree);
+    let tree = RTree::build(&scene.all_object_bounds(), hdov::format::tree_page::fanout(512), params.tree);
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let mut backend = hdov::dov::CpuBackend::new(&scene, RESOLUTION).unwrap();

@@ -11,7 +11,6 @@ use hdov::dov::BackendKind;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::progress::Progress;
-use hdov::query::Method;
 use hdov::review::{self, ReviewParams, search};
 use hdov::rtree::{RTree, TreeAlgorithm};
 use hdov::{BuildParams, Database, SessionParams, VisibilityParams};
@@ -186,9 +185,8 @@ fn a_review_walk_loads_its_disk_cells_and_its_deltas_add_up() {
     let p = small();
     for budget in [None, Some(40_000u64), Some(4_000)] {
         for cache in [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dplru, PolicyKind::DOV_TIME] {
-            let params =
-                SessionParams { method: Method::Review(p), cache, resident_bytes: budget, ..Default::default() };
-            let mut s = db.session(&params).unwrap();
+            let params = SessionParams { cache, resident_bytes: budget, ..Default::default() };
+            let mut s = db.review_session(&params, p).unwrap();
             let (mut loaded, mut evicted, mut flips) = (0i64, 0i64, 0);
             for (k, &(at, look)) in street().iter().enumerate() {
                 let step = s.step(at, Some(look)).unwrap();
@@ -215,7 +213,7 @@ fn a_review_walk_loads_its_disk_cells_and_its_deltas_add_up() {
                 let resident: BTreeSet<u64> = s.resident().map(|(k, _)| k).collect();
                 let drawn = s.frame_items(at, Some(look));
                 assert!(drawn.iter().all(|i| resident.contains(&i.lod_ref.offset)));
-                assert!(drawn.iter().all(|i| hdov::query::camera::distance_to_box(at, &i.mbr) <= p.eyesight));
+                assert!(drawn.iter().all(|i| hdov::camera::distance_to_box(at, &i.mbr) <= p.eyesight));
                 assert_eq!(step.items as usize, drawn.len());
             }
             assert!(flips >= 6, "the walk leaves its disk cells ({flips} flips)");
@@ -234,9 +232,8 @@ fn review_prefetch_reads_the_predicted_cell_before_arrival() {
     let db = city(&tmp.path().join("db"));
     let path: Vec<Vec3> = (0..40).map(|i| Vec3::new(-2.0 + 2.4 * i as f32, 1.7, 17.0)).collect();
     let walk = |prefetch: bool| {
-        let params =
-            SessionParams { method: Method::Review(small()), cache: PolicyKind::Dplru, prefetch, ..Default::default() };
-        let mut s = db.session(&params).unwrap();
+        let params = SessionParams { cache: PolicyKind::Dplru, prefetch, ..Default::default() };
+        let mut s = db.review_session(&params, small()).unwrap();
         let (mut arrival, mut ahead) = (0, 0);
         for &at in &path {
             let st = s.step(at, Some(Vec3::X)).unwrap();
@@ -261,7 +258,7 @@ fn bad_review_parameters_are_refused_and_a_visual_walk_takes_dplru() {
         (ReviewParams { eyesight: 0.0, ..Default::default() }, "eyesight"),
         (ReviewParams { fov_deg: 180.0, ..Default::default() }, "fov"),
     ] {
-        let err = db.session(&SessionParams { method: Method::Review(p), ..Default::default() }).err().unwrap();
+        let err = db.review_session(&SessionParams::default(), p).err().unwrap();
         assert!(err.to_string().starts_with(name), "{err}");
     }
     let mut s = db.session(&SessionParams { cache: PolicyKind::Dplru, ..Default::default() }).unwrap();

@@ -11,9 +11,10 @@ use hdov_storage::VData;
 
 use super::vpages::read_cells;
 use super::{VisibilityParams, begin_write, write_layouts, write_manifest};
-use crate::db::{CATALOG_FILE, Database, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
+use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Result};
+use crate::format::{CATALOG_FILE, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
 use crate::grid::ViewGrid;
 
 /// One shard database, checked to be a shard: its visibility parameters, results and grid.

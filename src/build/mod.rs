@@ -7,7 +7,6 @@
 //! - [`merge`]: shard databases joined into one.
 
 pub mod merge;
-pub mod params;
 pub mod vpages;
 
 use std::path::{Path, PathBuf};
@@ -15,23 +14,23 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::db::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
-use crate::db::tree_page::{self, NodePage};
-use crate::db::{
-    CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
-    MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
-};
 use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
 use crate::dov::{BackendKind, WithRays, open_backend};
 use crate::error::{Error, Result};
+use crate::format::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
+pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
+use crate::format::tree_page::{self, NodePage};
+use crate::format::{
+    CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
+    MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
+};
 use crate::grid::ViewGrid;
 use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
 use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, Overwrite, PageFileWriter, VData, write_layout};
-pub use params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]

@@ -7,12 +7,12 @@ use serde_json::json;
 
 use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
-use hdov::db::Manifest;
 use hdov::dov::BackendKind;
 use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{FloorTest, Shard};
 use hdov::dov::probe::RayProbing;
 use hdov::error::{Error, Result};
+use hdov::format::Manifest;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::progress::Progress;

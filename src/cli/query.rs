@@ -9,8 +9,8 @@ use serde::Serialize;
 use super::args::{parse_dims, parse_vec3};
 use hdov::city::WalkKind;
 use hdov::error::{Error, Result};
-use hdov::query::{Camera, LodRule, Method, Mode};
-use hdov::render::View;
+use hdov::query::{Camera, LodRule, Mode};
+use hdov::render::{View, fidelity};
 use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
 use hdov_storage::{LayoutKind, PolicyKind};
@@ -248,9 +248,9 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         }
         (None, None) => return Err(Error::bad_param("path", "give --path FILE or --walk KIND")),
     };
-    let method = match a.method {
-        WalkMethod::Visual => Method::Visual,
-        WalkMethod::Review => Method::Review(ReviewParams {
+    let review = match a.method {
+        WalkMethod::Visual => None,
+        WalkMethod::Review => Some(ReviewParams {
             review_box: a.review_box,
             eyesight: a.eyesight,
             fov_deg: a.query.fov.unwrap_or(review::DEFAULT_FOV_DEG),
@@ -258,7 +258,6 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         }),
     };
     let params = SessionParams {
-        method,
         query: a.query.params(),
         cache: a.cache,
         cache_pages: Some(a.cache_pages),
@@ -266,7 +265,10 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         resident_bytes: a.resident_bytes,
         prefetch: a.prefetch,
     };
-    let mut session = db.session(&params)?;
+    let mut session = match review {
+        None => db.session(&params)?,
+        Some(r) => db.review_session(&params, r)?,
+    };
     let renderer = if a.fidelity { Some(super::render::open_renderer()?) } else { None };
     let mut steps: Vec<Step> = Vec::with_capacity(path.len());
     for (line, at, look) in path {
@@ -277,9 +279,9 @@ pub fn walk(a: WalkCmd) -> Result<()> {
             e => e,
         })?;
         if let (Some(renderer), Some(look)) = (&renderer, look.or(a.query.look)) {
-            let view = fidelity_view(method, a.query.fov, at, look, a.size);
+            let view = fidelity_view(review, a.query.fov, at, look, a.size);
             view.check()?;
-            let f = session.fidelity(renderer, &view)?;
+            let f = fidelity::of_session(renderer, &session, &view)?;
             (step.psnr, step.coverage_diff) = (Some(f.psnr), Some(f.coverage_diff));
         }
         steps.push(step);
@@ -318,11 +320,11 @@ pub fn walk(a: WalkCmd) -> Result<()> {
 /// The camera `hdov walk --fidelity` renders a step from: VISUAL's vertical field of view
 /// (`fov`, default 60°); REVIEW's, narrowed so that the image's horizontal field of view is
 /// REVIEW's own (`fov`, default 45°, both ways) and nothing at the image's edges was culled.
-fn fidelity_view(method: Method, fov: Option<f32>, at: Vec3, look: Vec3, size: [u32; 2]) -> View {
+fn fidelity_view(review: Option<ReviewParams>, fov: Option<f32>, at: Vec3, look: Vec3, size: [u32; 2]) -> View {
     let aspect = size[0] as f32 / size[1].max(1) as f32;
-    let fov_y = match method {
-        Method::Visual => fov.unwrap_or(60.0),
-        Method::Review(r) => {
+    let fov_y = match review {
+        None => fov.unwrap_or(60.0),
+        Some(r) => {
             let h = fov.unwrap_or(r.fov_deg).to_radians();
             (2.0 * ((h / 2.0).tan() / aspect.max(1.0)).atan()).to_degrees()
         }

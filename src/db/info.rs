@@ -5,9 +5,10 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Database, FileEntry, VisibilityInfo};
-use crate::build::BuildParams;
+use super::Database;
 use crate::error::Result;
+use crate::format::params::BuildParams;
+use crate::format::{FileEntry, VisibilityInfo};
 use crate::rtree::TreeStats;
 
 /// A database described: counts, grid, build parameters, files and every layout's costs.

@@ -1,38 +1,22 @@
-//! The database directory, format v1.
+//! The reader: an open database directory (its files are [`crate::format`]'s).
 //!
-//! ```text
-//! DB/manifest.json    format version, build parameters, counts (JSON; first key "hdov")
-//! DB/tree.pages       R-tree nodes, one per page, node id = page number (storage page file, kind TREE)
-//! DB/geometry.blob    every LOD level as a bincode mesh record (storage blob file, kind GEOM)
-//! DB/catalog.blob     objects and LOD references (storage blob file, kind CATL)
-//! ```
 //! A database is written by [`crate::build()`] into a temporary directory and renamed into place
 //! (see `hdov_storage::DirTxn`); it is immutable afterwards. `docs/format.md` gives every byte.
 
-pub mod catalog;
+pub(crate) mod access;
 pub mod info;
-pub mod manifest;
-pub mod tree_page;
 
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
+use crate::format::catalog::{Catalog, LodRef};
+use crate::format::tree_page::{self, NodePage};
+use crate::format::{
+    CATALOG_FILE, CATALOG_KIND, GEOMETRY_FILE, GEOMETRY_KIND, MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND,
+};
 use crate::grid::ViewGrid;
 use crate::scene::Mesh;
-use catalog::{Catalog, LodRef};
 use hdov_storage::{BlobFile, Layout, LayoutKind, PageFile, PageReader, ReadMode};
-pub use manifest::{Counts, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
-use tree_page::NodePage;
-
-/// 2: the catalog holds node shapes (the stop rule's inputs).
-pub const FORMAT_VERSION: u32 = 2;
-pub const MANIFEST_FILE: &str = "manifest.json";
-pub const TREE_FILE: &str = "tree.pages";
-pub const GEOMETRY_FILE: &str = "geometry.blob";
-pub const CATALOG_FILE: &str = "catalog.blob";
-pub const TREE_KIND: [u8; 4] = *b"TREE";
-pub const GEOMETRY_KIND: [u8; 4] = *b"GEOM";
-pub const CATALOG_KIND: [u8; 4] = *b"CATL";
 
 /// An open, read-only database: `Send + Sync`, so any number of threads may query it at once,
 /// each reading pages through its own [`PageReader`] (which counts them) and its own

@@ -26,76 +26,8 @@ use glam::Vec3;
 use super::precompute::{halton3, is_inside};
 use super::{DovBackend, PointDov};
 use crate::error::Result;
+pub use crate::format::params::AdaptiveSampling;
 use crate::geom::Aabb;
-
-/// Parameters of the adaptive sampler: `seeds` spread points per cell first, at most `budget`
-/// interior points per cell in all. Written `adaptive:SEEDS:BUDGET` (`adaptive` alone is
-/// [`AdaptiveSampling::DEFAULT`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(into = "String", try_from = "String")]
-pub struct AdaptiveSampling {
-    pub seeds: u32,
-    pub budget: u32,
-}
-
-impl AdaptiveSampling {
-    /// Two seeds (one point sees past one side of an occluder, two see past both more often),
-    /// at most 16 points: chosen by the audit in docs/dov.md ("Adaptive sampling").
-    pub const DEFAULT: AdaptiveSampling = AdaptiveSampling { seeds: 2, budget: 16 };
-
-    /// `1 ≤ seeds ≤ budget`.
-    pub fn new(seeds: u32, budget: u32) -> std::result::Result<Self, String> {
-        if seeds == 0 || seeds > budget {
-            return Err(format!("adaptive:{seeds}:{budget}: need 1 ≤ SEEDS ≤ BUDGET"));
-        }
-        Ok(Self { seeds, budget })
-    }
-}
-
-impl std::fmt::Display for AdaptiveSampling {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "adaptive:{}:{}", self.seeds, self.budget)
-    }
-}
-
-impl std::str::FromStr for AdaptiveSampling {
-    type Err = String;
-    /// `adaptive` or `adaptive:SEEDS:BUDGET`.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match parse_two_counts(s, "adaptive", "SEEDS:BUDGET")? {
-            None => Ok(Self::DEFAULT),
-            Some((seeds, budget)) => Self::new(seeds, budget),
-        }
-    }
-}
-
-/// Parses `NAME` (`None`: the defaults) or `NAME:A:B` (two counts); `shape` names the counts in
-/// errors (`SEEDS:BUDGET`).
-pub(crate) fn parse_two_counts(s: &str, name: &str, shape: &str) -> std::result::Result<Option<(u32, u32)>, String> {
-    let expected = || format!("'{s}': expected {name} or {name}:{shape}");
-    let Some(rest) = s.strip_prefix(name) else { return Err(expected()) };
-    if rest.is_empty() {
-        return Ok(None);
-    }
-    let count = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("'{s}': '{x}' is not a count"));
-    match rest.strip_prefix(':').and_then(|r| r.split_once(':')) {
-        Some((a, b)) => Ok(Some((count(a)?, count(b)?))),
-        None => Err(expected()),
-    }
-}
-
-impl From<AdaptiveSampling> for String {
-    fn from(a: AdaptiveSampling) -> String {
-        a.to_string()
-    }
-}
-
-impl TryFrom<String> for AdaptiveSampling {
-    type Error = String;
-    fn try_from(s: String) -> std::result::Result<Self, String> {
-        s.parse()
-    }
-}
 
 /// The axes along which a cell's view changes most: those at least half as long as its longest
 /// (a flat 5 × 0.5 × 5 cell refines in x and z only).

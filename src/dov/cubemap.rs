@@ -17,9 +17,8 @@
 
 use glam::Vec3;
 
-/// Largest R: 8192 is the 2D texture size every wgpu adapter must offer, and a cube map of it
-/// already holds 6 · 8192² = 403 M texels.
-pub const MAX_RESOLUTION: u32 = 8192;
+/// Largest R (the build parameters' bound).
+pub const MAX_RESOLUTION: u32 = crate::format::params::limits::MAX_RESOLUTION;
 
 /// The six cube faces, in the order used for texel indices: +X, −X, +Y, −Y, +Z, −Z.
 pub const FACE_COUNT: usize = 6;

@@ -45,13 +45,8 @@ use crate::scene::{Mesh, Scene};
 /// wgpu allows).
 const UNIFORM_STRIDE: u64 = 256;
 
-/// Default of [`GpuOptions::lod_tolerance_texels`]: a twentieth of a texel at the face centre.
-/// Half a texel (the first guess) changes some objects' DoV by up to 10 centre texels on a
-/// generated city, because the simplifier's error is not a bound on silhouette movement and a
-/// shifted silhouette changes an area in proportion to its length; 0.05 keeps every object within
-/// the backends' agreement tolerance (0.5 % of its DoV + 2 centre texels) at R = 128 and 256
-/// (docs/dov.md, "LOD-aware drawing").
-pub const DEFAULT_LOD_TOLERANCE_TEXELS: f32 = 0.05;
+/// Default of [`GpuOptions::lod_tolerance_texels`] (the build parameter's default).
+pub use crate::format::params::DEFAULT_LOD_TOLERANCE_TEXELS;
 
 /// Construction options of [`GpuBackend::with_options`].
 #[derive(Clone, Copy, Debug)]

@@ -25,6 +25,7 @@ pub use cubemap::CubeMap;
 pub use gpu::GpuBackend;
 
 use crate::error::Result;
+pub use crate::format::params::BackendKind;
 
 /// Id of a texel that sees no object.
 pub const NO_OBJECT: u32 = u32::MAX;
@@ -287,32 +288,6 @@ impl DovBackend for WithRays {
 pub fn default_near(scene_bounds: &crate::geom::Aabb) -> f32 {
     let diag = scene_bounds.extent().length();
     if diag.is_finite() { (diag * 1e-4).max(1e-4) } else { 1e-4 }
-}
-
-/// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`). `Auto` takes the GPU
-/// backend on graphics hardware and the CPU ray caster otherwise: on Mesa's CPU rasterisers the
-/// ray caster measures a city several times faster (docs/dov.md, speed).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum BackendKind {
-    /// The GPU backend on a hardware adapter, else the CPU backend.
-    #[default]
-    Auto,
-    Gpu,
-    Cpu,
-}
-
-impl std::str::FromStr for BackendKind {
-    type Err = crate::Error;
-
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "auto" => Ok(BackendKind::Auto),
-            "gpu" => Ok(BackendKind::Gpu),
-            "cpu" => Ok(BackendKind::Cpu),
-            _ => Err(crate::Error::bad_param("backend", format!("'{s}': expected auto, gpu or cpu"))),
-        }
-    }
 }
 
 /// Opens the backend `kind` for `scene` at `resolution`. `Auto` uses the CPU backend when no

@@ -22,6 +22,7 @@ use super::adaptive::{AdaptiveSampling, sample_cell};
 use super::probe::{RayProbing, probe_cell};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Result};
+pub use crate::format::params::{FloorTest, Shard};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 
@@ -97,84 +98,7 @@ impl CellDov {
     }
 }
 
-/// Part `index` of `count` of a grid's cells: the contiguous cell-id range
-/// `[index·C/count, (index+1)·C/count)`. Contiguous ranges keep most corners inside one shard.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(into = "[u32; 2]", try_from = "[u32; 2]")]
-pub struct Shard {
-    pub index: u32,
-    pub count: u32,
-}
-
-impl Shard {
-    /// The whole grid.
-    pub const ALL: Shard = Shard { index: 0, count: 1 };
-
-    /// Part `index` of `count`; refused unless 0 ≤ index < count.
-    pub fn new(index: u32, count: u32) -> std::result::Result<Shard, String> {
-        if count == 0 || index >= count {
-            return Err(format!("{index}/{count}: need 0 ≤ I < N"));
-        }
-        Ok(Shard { index, count })
-    }
-
-    /// The cell ids of this shard.
-    pub fn cells(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
-        let c = grid.cell_count() as u64;
-        let lo = c * self.index as u64 / self.count as u64;
-        let hi = c * (self.index as u64 + 1) / self.count as u64;
-        lo as usize..hi as usize
-    }
-}
-
-impl From<Shard> for [u32; 2] {
-    fn from(s: Shard) -> [u32; 2] {
-        [s.index, s.count]
-    }
-}
-
-impl TryFrom<[u32; 2]> for Shard {
-    type Error = String;
-    fn try_from([index, count]: [u32; 2]) -> std::result::Result<Shard, String> {
-        Shard::new(index, count)
-    }
-}
-
-impl std::str::FromStr for Shard {
-    type Err = String;
-    /// `I/N` (0 ≤ I < N), as `--shard` takes it.
-    fn from_str(s: &str) -> std::result::Result<Shard, String> {
-        let (i, n) = s.split_once('/').ok_or_else(|| format!("'{s}': expected I/N"))?;
-        let index: u32 = i.trim().parse().map_err(|_| format!("'{s}': I is not a number"))?;
-        let count: u32 = n.trim().parse().map_err(|_| format!("'{s}': N is not a number"))?;
-        Shard::new(index, count)
-    }
-}
-
-impl std::fmt::Display for Shard {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}/{}", self.index, self.count)
-    }
-}
-
-/// A test that marks an object *possibly visible* from a cell although none of the cell's sample
-/// points sees it; such objects get the one-texel floor DoV.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum FloorTest {
-    /// The object's box lies within this distance of the cell's box (near objects: the corners
-    /// can all be cut off from an object right next to the cell).
-    BoxWithin(f32),
-    /// Some corner of a neighbouring cell (the 4 × 4 × 4 block of corners around the cell,
-    /// clipped to the grid) sees the object: views change continuously, so an object that a
-    /// point just outside the cell sees is often seen from inside. Free in measurements: the
-    /// neighbours' corners are measured for their own cells anyway (a shard measures one extra
-    /// layer of corners around its cells).
-    NeighbourCorners,
-}
-
 impl FloorTest {
-    /// The names a build takes: `box` (the object's box meets the cell's) and `neighbours`.
-    pub const NAMES: &'static str = "box, box:MARGIN, neighbours";
     /// Whether this test finds `object` (with world box `bounds`) possibly visible from the cell
     /// `cell_box`; `seen_nearby` holds the objects that the neighbouring cells' corners see.
     pub fn finds(&self, object: u32, bounds: &Aabb, cell_box: &Aabb, seen_nearby: &HashSet<u32>) -> bool {
@@ -184,31 +108,6 @@ impl FloorTest {
                 !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
             }
             FloorTest::NeighbourCorners => seen_nearby.contains(&object),
-        }
-    }
-}
-
-impl std::fmt::Display for FloorTest {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match *self {
-            FloorTest::BoxWithin(0.0) => f.write_str("box"),
-            FloorTest::BoxWithin(m) => write!(f, "box:{m}"),
-            FloorTest::NeighbourCorners => f.write_str("neighbours"),
-        }
-    }
-}
-
-impl std::str::FromStr for FloorTest {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<FloorTest, String> {
-        let margin = |m: &str| m.parse::<f32>().ok().filter(|m| m.is_finite() && *m >= 0.0);
-        match s.split_once(':') {
-            None if s == "box" => Ok(FloorTest::BoxWithin(0.0)),
-            None if s == "neighbours" => Ok(FloorTest::NeighbourCorners),
-            Some(("box", m)) => margin(m)
-                .map(FloorTest::BoxWithin)
-                .ok_or_else(|| format!("'{s}': the margin must be a finite length >= 0")),
-            _ => Err(format!("unknown test '{s}' (expected {})", FloorTest::NAMES)),
         }
     }
 }

@@ -30,60 +30,9 @@ use rayon::prelude::*;
 use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
 use super::precompute::halton3;
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
+pub use crate::format::params::RayProbing;
 use crate::geom::Aabb;
 use crate::scene::Scene;
-
-/// Parameters of ray probing: `points` probe points per cell, `rays` rays from each towards each
-/// unseen candidate. Written `probe:POINTS:RAYS` (`probe` alone is [`RayProbing::DEFAULT`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(into = "String", try_from = "String")]
-pub struct RayProbing {
-    pub points: u32,
-    pub rays: u32,
-}
-
-impl RayProbing {
-    /// Chosen by the audit in docs/dov.md ("Ray probing").
-    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4 };
-
-    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`.
-    pub fn new(points: u32, rays: u32) -> std::result::Result<Self, String> {
-        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) {
-            return Err(format!("probe:{points}:{rays}: need 1 ≤ POINTS ≤ 4096 and 1 ≤ RAYS ≤ 4096"));
-        }
-        Ok(Self { points, rays })
-    }
-}
-
-impl std::fmt::Display for RayProbing {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "probe:{}:{}", self.points, self.rays)
-    }
-}
-
-impl std::str::FromStr for RayProbing {
-    type Err = String;
-    /// `probe` or `probe:POINTS:RAYS`.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match super::adaptive::parse_two_counts(s, "probe", "POINTS:RAYS")? {
-            None => Ok(Self::DEFAULT),
-            Some((points, rays)) => Self::new(points, rays),
-        }
-    }
-}
-
-impl From<RayProbing> for String {
-    fn from(a: RayProbing) -> String {
-        a.to_string()
-    }
-}
-
-impl TryFrom<String> for RayProbing {
-    type Error = String;
-    fn try_from(s: String) -> std::result::Result<Self, String> {
-        s.parse()
-    }
-}
 
 /// Single rays through a scene, with the id rule of [`super::DovBackend::render_ids`]. The CPU
 /// backend is one ([`super::DovBackend::ray_caster`]).

@@ -5,13 +5,12 @@
 //!   budget (§6.1.2), a visibility-modulated screen-space error (seeds 000/001), and plain
 //!   frustum culling;
 //! - [`Session`]: a walkthrough, cell flips, delta loading of LODs and a page cache;
-//! - [`camera`]: the view frustum that every mode culls its answer to when given a camera.
+//! - [`Camera`] ([`crate::camera`]): the view frustum that every mode culls its answer to when
+//!   given a camera.
 //!
-//! Every tree page and V-page is read through [`access::Access`], which counts what each query
-//! reads per file.
+//! Every tree page and V-page is read through the database's page access (`db::access`),
+//! which counts what each query reads per file.
 
-pub(crate) mod access;
-pub mod camera;
 pub mod session;
 mod traverse;
 
@@ -24,13 +23,15 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+pub use crate::camera::Camera;
 use crate::db::Database;
-use crate::db::catalog::LodRef;
+use crate::db::access::{Access, PageIo};
 use crate::error::{Error, Result};
+use crate::format::catalog::LodRef;
 use crate::geom::Aabb;
-pub use camera::Camera;
 use hdov_storage::LayoutKind;
-pub use session::{Method, Session, SessionParams, Step};
+pub(crate) use session::CellMethod;
+pub use session::{Session, SessionParams, Step};
 
 /// DoV above which an object is drawn at full detail (thesis eq. 5.6): an object whose box does
 /// not hold the viewpoint covers at most half the sphere.
@@ -223,6 +224,26 @@ pub struct QueryStats {
     pub micros: u64,
 }
 
+impl QueryStats {
+    /// The costs of a query that read `io`, entered `nodes_visited` nodes and returned `items`,
+    /// since `start`.
+    pub(crate) fn new(io: PageIo, nodes_visited: u64, items: &[Item], over_budget: bool, start: Instant) -> Self {
+        QueryStats {
+            tree_pages: io.tree,
+            vindex_pages: io.vindex,
+            vpage_pages: io.vpages,
+            pages_read: io.tree + io.vindex + io.vpages,
+            pages_requested: io.requested,
+            page_hits: io.hits,
+            nodes_visited,
+            faces: items.iter().map(|i| u64::from(i.faces)).sum(),
+            geometry_bytes: 0,
+            over_budget,
+            micros: start.elapsed().as_micros() as u64,
+        }
+    }
+}
+
 /// What a query returned.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Answer {
@@ -239,6 +260,22 @@ pub struct Answer {
     pub warnings: Vec<String>,
 }
 
+impl Answer {
+    /// The answer from `at` in `cell` (`[i, j, k]` and id) to `params`, read through `layout`:
+    /// the one place answers are made, by queries and by REVIEW's searches.
+    pub(crate) fn new(
+        at: Vec3,
+        (cell, cell_id): ([u32; 3], u32),
+        params: &QueryParams,
+        layout: String,
+        items: Vec<Item>,
+        stats: QueryStats,
+        warnings: Vec<String>,
+    ) -> Answer {
+        Answer { at: at.to_array(), cell, cell_id, mode: params.mode, eta: params.eta, layout, items, stats, warnings }
+    }
+}
+
 impl Database {
     /// Answers a point query from `at`.
     ///
@@ -248,19 +285,13 @@ impl Database {
     /// Costs the pages it reads (counted in [`Answer::stats`]): a cell flip, then one tree page
     /// and one V-page per node the traversal enters.
     pub fn query(&self, at: Vec3, params: &QueryParams) -> Result<Answer> {
-        let mut access = access::Access::open(self, params.layout)?;
+        let mut access = Access::open(self, params.layout)?;
         self.query_with(&mut access, at, params, true)
     }
 
     /// A query through an existing reader (a session's, with its cache). With `cull` false the
     /// camera only sets the screen-error scale: the answer is the whole cell's.
-    pub(crate) fn query_with(
-        &self,
-        access: &mut access::Access,
-        at: Vec3,
-        params: &QueryParams,
-        cull: bool,
-    ) -> Result<Answer> {
+    pub(crate) fn query_with(&self, access: &mut Access, at: Vec3, params: &QueryParams, cull: bool) -> Result<Answer> {
         let start = Instant::now();
         let warnings = self.check_query(params)?;
         let (cell, cell_id) = self.locate(at)?;
@@ -272,31 +303,8 @@ impl Database {
             let frustum = cam.frustum(at);
             out.items.retain(|i| frustum.meets(&i.mbr));
         }
-        let io = access.io();
-        let stats = QueryStats {
-            tree_pages: io.tree,
-            vindex_pages: io.vindex,
-            vpage_pages: io.vpages,
-            pages_read: io.tree + io.vindex + io.vpages,
-            pages_requested: io.requested,
-            page_hits: io.hits,
-            nodes_visited: out.nodes_visited,
-            faces: out.items.iter().map(|i| u64::from(i.faces)).sum(),
-            geometry_bytes: 0,
-            over_budget: out.over_budget,
-            micros: start.elapsed().as_micros() as u64,
-        };
-        Ok(Answer {
-            at: at.to_array(),
-            cell,
-            cell_id,
-            mode: params.mode,
-            eta: params.eta,
-            layout: access.layout_name(),
-            items: out.items,
-            stats,
-            warnings,
-        })
+        let stats = QueryStats::new(access.io(), out.nodes_visited, &out.items, out.over_budget, start);
+        Ok(Answer::new(at, (cell, cell_id), params, access.layout_name(), out.items, stats, warnings))
     }
 
     /// The cell holding `at` (points on an inner cell border belong to the upper cell).

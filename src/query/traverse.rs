@@ -3,13 +3,13 @@
 
 use glam::{Mat4, Vec3};
 
-use super::access::Access;
-use super::camera::Frustum;
 use super::{Item, ItemKind, LodRule, MAX_DOV, Mode, QueryParams};
+use crate::camera::Frustum;
 use crate::db::Database;
-use crate::db::catalog::LodRef;
-use crate::db::tree_page::NodePage;
+use crate::db::access::Access;
 use crate::error::Result;
+use crate::format::catalog::LodRef;
+use crate::format::tree_page::NodePage;
 use crate::geom::{Aabb, max_scale};
 use crate::lod::pick_level;
 use hdov_storage::VEntry;

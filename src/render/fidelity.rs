@@ -1,4 +1,4 @@
-//! Image fidelity of an answer against full detail (DESIGN §9): PSNR of the shaded images and
+//! Image fidelity of an answer against full detail (docs/render.md, "The metrics"): PSNR of the shaded images and
 //! the share of pixels whose coverage differs.
 //!
 //! - **PSNR** over the R, G and B channels of two 8-bit images of one size:
@@ -10,7 +10,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Image, NO_ITEM};
+use super::{ColorMode, Image, NO_ITEM, Renderer, View};
+use crate::error::Result;
+use crate::query::Session;
 
 /// Default relative depth tolerance of [`coverage_diff`]: 1 %.
 pub const DEFAULT_DEPTH_TOLERANCE: f32 = 0.01;
@@ -74,6 +76,16 @@ pub struct Fidelity {
     /// Share of pixels where only one image shows a surface (coverage difference without the
     /// depth test: the silhouettes alone).
     pub silhouette_diff: f64,
+}
+
+/// The fidelity of what a walkthrough `session` draws from `view`
+/// ([`Renderer::render_session`]) against full detail from the same view, both shaded. For a
+/// fair number the view should lie inside the session's own frustum (REVIEW: `fov_deg` both
+/// ways), else the objects it culled at the image's edges count as differences.
+pub fn of_session(renderer: &Renderer, session: &Session, view: &View) -> Result<Fidelity> {
+    let image = renderer.render_session(session, view)?;
+    let full = renderer.render_full(session.database(), view, ColorMode::Shaded)?;
+    Ok(compare(&image, &full))
 }
 
 /// The fidelity of `image` against `reference` (e.g. an answer's view against full detail).

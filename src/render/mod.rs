@@ -18,12 +18,12 @@ use std::str::FromStr;
 
 use glam::{Mat4, Vec3};
 
+use crate::camera::{Camera, Frustum};
 use crate::db::Database;
-use crate::db::catalog::LodRef;
 use crate::error::{Error, Result};
+use crate::format::catalog::LodRef;
 use crate::gfx::{Gpu, Vertex, padded_row_bytes, push_world};
-use crate::query::camera::Frustum;
-use crate::query::{Answer, Camera, ItemKind};
+use crate::query::{Answer, Item, ItemKind, Session};
 use crate::scene::Mesh;
 
 /// [`Image::ids`] where nothing was drawn.
@@ -91,13 +91,9 @@ impl View {
         self.camera().check().map_err(|r| Error::bad_param("camera", r))
     }
 
-    /// Unit forward, right and up vectors (up is y unless the view looks straight up or down,
-    /// then z, as [`Camera::frustum`]).
+    /// Unit forward, right and up vectors ([`crate::camera::basis`], as [`Camera::frustum`]).
     pub fn basis(&self) -> (Vec3, Vec3, Vec3) {
-        let forward = self.look.normalize();
-        let up_hint = if forward.cross(Vec3::Y).length_squared() < 1e-6 { Vec3::Z } else { Vec3::Y };
-        let right = forward.cross(up_hint).normalize();
-        (forward, right, right.cross(forward))
+        crate::camera::basis(self.look)
     }
 
     /// The matrix taking `position − eye` to clip space: reverse Z (depth 1 at the near plane,
@@ -484,12 +480,28 @@ impl Renderer {
     /// an answer of objects at LOD 0 draws exactly as [`Renderer::render_full`] does.
     /// [`Image::ids`] are indices into the answer's items.
     pub fn render_answer(&self, db: &Database, answer: &Answer, view: &View, mode: ColorMode) -> Result<Image> {
-        let mut order: Vec<usize> = (0..answer.items.len()).collect();
-        order.sort_by_key(|&i| (answer.items[i].kind, answer.items[i].id));
+        self.render_items(db, &answer.items.iter().collect::<Vec<_>>(), view, mode)
+    }
+
+    /// What a walkthrough `session` draws from `view`, shaded: its current answer culled as
+    /// [`Session::frame_items`] culls it from `view.eye` looking along `view.look`.
+    /// [`Image::ids`] are indices into those items. Errors before the session's first step.
+    pub fn render_session(&self, session: &Session, view: &View) -> Result<Image> {
+        if session.answer().is_none() {
+            return Err(Error::bad_param("fidelity", "the session has taken no step yet"));
+        }
+        let items = session.frame_items(view.eye, Some(view.look));
+        self.render_items(session.database(), &items, view, ColorMode::Shaded)
+    }
+
+    /// `items` as [`Renderer::render_answer`] draws an answer's.
+    fn render_items(&self, db: &Database, items: &[&Item], view: &View, mode: ColorMode) -> Result<Image> {
+        let mut order: Vec<usize> = (0..items.len()).collect();
+        order.sort_by_key(|&i| (items[i].kind, items[i].id));
         let parts: Vec<Part> = order
             .iter()
             .map(|&i| {
-                let it = &answer.items[i];
+                let it = items[i];
                 Part { kind: it.kind, id: it.id, lod: it.lod, dov: Some(it.dov), lod_ref: it.lod_ref }
             })
             .collect();

@@ -13,19 +13,19 @@
 //! - prefetch queries the cell around `F + k·velocity` ([`predicted_cell`]);
 //! - what is drawn is the object buffer culled to the view frustum and the eyesight.
 //!
-//! A REVIEW walk is a [`Session`](crate::Session) with [`Method::Review`]: it shares the
-//! visual session's delta loading, resident geometry and [`Step`](crate::Step) reports, so
-//! walks compare 1:1. `docs/review.md` gives the formulas and the decisions.
+//! A REVIEW walk is a [`Session`](crate::Session) started by [`Database::review_session`]
+//! ([`session`]): it shares the visual session's delta loading, resident geometry and
+//! [`Step`](crate::Step) reports, so walks compare 1:1. `docs/review.md` gives the formulas and
+//! the decisions.
 
 pub mod search;
-
-use std::collections::{BTreeMap, HashMap, HashSet};
+mod session;
 
 use glam::Vec3;
 
+#[cfg(doc)]
 use crate::db::Database;
 use crate::geom::Aabb;
-use crate::query::{Item, ItemKind};
 
 /// The thesis's eyesight: the depth of the view frustum, 1 km.
 pub const DEFAULT_EYESIGHT: f32 = 1000.0;
@@ -84,8 +84,8 @@ impl ReviewParams {
     }
 
     /// The camera REVIEW culls with: square image, `fov_deg` both ways, looking along `look`.
-    pub fn camera(&self, look: Vec3) -> crate::query::Camera {
-        crate::query::Camera { look, fov_y_deg: self.fov_deg, aspect: 1.0, ..Default::default() }
+    pub fn camera(&self, look: Vec3) -> crate::camera::Camera {
+        crate::camera::Camera { look, fov_y_deg: self.fov_deg, aspect: 1.0, ..Default::default() }
     }
 }
 
@@ -96,9 +96,7 @@ pub fn frustum_cell(eye: Vec3, look: Option<Vec3>, p: &ReviewParams) -> Aabb {
     let Some(dir) = look.and_then(|l| l.try_normalize()) else {
         return Aabb::new(eye - p.eyesight, eye + p.eyesight);
     };
-    let up_hint = if dir.cross(Vec3::Y).length_squared() < 1e-6 { Vec3::Z } else { Vec3::Y };
-    let right = dir.cross(up_hint).normalize();
-    let up = right.cross(dir);
+    let (_, right, up) = crate::camera::basis(dir);
     let half = p.eyesight * (p.fov_deg.to_radians() / 2.0).tan();
     let far = eye + dir * p.eyesight;
     let corners =
@@ -127,86 +125,4 @@ pub fn dplru_priority(level: u32, root_level: u32, block_distance: f32, scale: f
     let pp = if root_level == 0 { 1.0 } else { f64::from(level) / f64::from(root_level) };
     let pd = 1.0 - (f64::from(block_distance) / f64::from(scale.max(f32::MIN_POSITIVE))).min(1.0);
     DPLRU_WEIGHT * pp + DPLRU_WEIGHT * pd
-}
-
-/// A REVIEW session's state beside the shared [`Session`](crate::Session) one.
-#[derive(Debug)]
-pub(crate) struct ReviewState {
-    pub params: ReviewParams,
-    /// The disk cell queried last.
-    pub cell: Option<Aabb>,
-    /// Cells every object of which is in the buffer (CSearch's H), the current one included.
-    pub history: Vec<Aabb>,
-    /// The object buffer: what the searches returned and is still resident, by object.
-    pub buffer: BTreeMap<u32, Item>,
-    /// Boxes of the tree nodes met so far (children of nodes read), for DPLRU's distances.
-    pub boxes: HashMap<u32, Aabb>,
-    /// Nodes read, whose cached pages' priorities follow the query cell.
-    pub read: HashSet<u32>,
-    /// The cell prefetched last.
-    pub prefetched: Option<Aabb>,
-    /// DPLRU's distance scale: the scene's largest extent.
-    pub scale: f32,
-}
-
-impl ReviewState {
-    pub fn new(db: &Database, params: ReviewParams) -> ReviewState {
-        let scale = db.node(0).map(|n| n.node.mbr().extent().max_element()).unwrap_or(1.0);
-        ReviewState {
-            params,
-            cell: None,
-            history: Vec::new(),
-            buffer: BTreeMap::new(),
-            boxes: HashMap::new(),
-            read: HashSet::new(),
-            prefetched: None,
-            scale,
-        }
-    }
-
-    /// The cache priority of node `id` while `cell` is queried.
-    pub fn priority(&self, db: &Database, id: u32, cell: &Aabb) -> f64 {
-        let shapes = &db.catalog().node_shapes;
-        let d = self.boxes.get(&id).map_or(0.0, |b| search::block_distance(b, cell));
-        dplru_priority(shapes[id as usize].level, shapes[0].level, d, self.scale)
-    }
-}
-
-/// The buffer item of object `o` (box `mbr`): full detail, no DoV (REVIEW measures none).
-pub(crate) fn object_item(db: &Database, o: u32, mbr: Aabb) -> Item {
-    let cat = db.catalog();
-    let lod_ref = cat.object_lods(o)[0];
-    Item {
-        kind: ItemKind::Object,
-        id: o,
-        name: cat.objects[o as usize].name.clone(),
-        lod: 0,
-        faces: lod_ref.faces,
-        dov: 0.0,
-        mbr,
-        lod_ref,
-    }
-}
-
-/// CSearch of `cell` against `state.history`, reading the tree through `access` at DPLRU
-/// priorities for `cell`; records the boxes met and the nodes read. Returns the qualifying
-/// object entries and the nodes read.
-pub(crate) fn search_through(
-    db: &Database,
-    access: &mut crate::query::access::Access,
-    state: &mut ReviewState,
-    cell: &Aabb,
-) -> crate::Result<(Vec<crate::rtree::Entry>, u64)> {
-    let history = state.history.clone();
-    let mut nodes = 0u64;
-    let found = search::csearch(cell, &history, &mut |id| {
-        let page = access.node(id, state.priority(db, id, cell))?;
-        nodes += 1;
-        if !page.node.is_leaf() {
-            state.boxes.extend(page.node.entries.iter().map(|e| (e.child, e.mbr)));
-        }
-        state.read.insert(id);
-        Ok(page.node)
-    })?;
-    Ok((found, nodes))
 }

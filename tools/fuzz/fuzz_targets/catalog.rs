@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use hdov::db::catalog::Catalog;
+use hdov::format::catalog::Catalog;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

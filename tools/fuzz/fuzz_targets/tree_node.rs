@@ -2,7 +2,7 @@
 //! payload. Any bytes give Ok or Err; a decoded node encodes back to itself.
 #![no_main]
 
-use hdov::db::tree_page::{check_position, decode, encode};
+use hdov::format::tree_page::{check_position, decode, encode};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

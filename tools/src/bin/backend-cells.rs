@@ -4,10 +4,10 @@
 //! `cargo run --release -p hdov-tools --bin backend-cells -- [R] [SHARD I/N]`
 
 use hdov::city::{CityParams, CityScale};
-use hdov::db::tree_page::fanout;
 use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
 use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::dov::{CpuBackend, DovBackend, DovDiff, GpuBackend};
+use hdov::format::tree_page::fanout;
 use hdov::lod::{LodParams, leaf_chain};
 use hdov::rtree::{RTree, TreeAlgorithm};
 

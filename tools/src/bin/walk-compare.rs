@@ -21,8 +21,8 @@ use hdov::city::WalkKind;
 use hdov::query::LodRule;
 use hdov::render::fidelity;
 use hdov::render::{ColorMode, Image, Renderer, View};
-use hdov::{Database, SessionParams, Step};
-use hdov_tools::experiments::walkthrough::{self, FOV_H_DEG, REVIEW_PICTURED, VISUAL_PICTURED};
+use hdov::{Database, Step};
+use hdov_tools::experiments::walkthrough::{self, FOV_H_DEG, REVIEW_PICTURED, VISUAL_PICTURED, WalkMethod};
 use hdov_tools::experiments::{mean, sequence_psnr, variance};
 
 struct Options {
@@ -106,8 +106,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None => Vec::new(),
         };
         let mut rows = Vec::new();
-        for (name, params) in walkthrough::methods(camera) {
-            rows.push(walk_one(&db, name, &params, &path, &views, &full, renderer.as_ref(), o.pictures.is_some())?);
+        for (name, method) in walkthrough::methods(camera) {
+            rows.push(walk_one(&db, name, &method, &path, &views, &full, renderer.as_ref(), o.pictures.is_some())?);
         }
         println!("### The {} walk: {} steps\n", kind.name(), o.steps);
         print_table(&rows);
@@ -128,25 +128,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 fn walk_one(
     db: &Database,
     name: &str,
-    params: &SessionParams,
+    method: &WalkMethod,
     path: &[(Vec3, Vec3)],
     views: &[View],
     full: &[Image],
     renderer: Option<&Renderer>,
     keep_images: bool,
 ) -> hdov::Result<Row> {
-    let mut session = db.session(params)?;
+    let mut session = method.open(db)?;
     for &(at, look) in path {
         session.step(at, Some(look))?;
     }
-    let mut session = db.session(params)?;
+    let mut session = method.open(db)?;
     let mut steps: Vec<Step> = Vec::with_capacity(path.len());
     let (mut psnr, mut coverage, mut draw_ms, mut images) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (i, &(at, look)) in path.iter().enumerate() {
         steps.push(session.step(at, Some(look))?);
         if let Some(r) = renderer {
             let start = Instant::now();
-            let image = session.draw(r, &views[i])?;
+            let image = r.render_session(&session, &views[i])?;
             draw_ms.push(start.elapsed().as_secs_f64() * 1e3);
             let f = fidelity::compare(&image, &full[i]);
             psnr.push(f.psnr);

@@ -23,8 +23,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use hdov::city::{CityParams, CityScale};
-use hdov::db::Manifest;
 use hdov::dov::BackendKind;
+use hdov::format::Manifest;
 use hdov::progress::Progress;
 use hdov::{BuildParams, Database, Scene, VisibilityParams};
 use hdov_storage::DovCodec;

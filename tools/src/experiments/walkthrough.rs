@@ -9,10 +9,10 @@
 //! and prints tables with measured drawing times.
 
 use glam::Vec3;
-use hdov::query::{Camera, LodRule, Method};
+use hdov::query::{Camera, LodRule};
 use hdov::render::{ColorMode, Image, Renderer, View, fidelity};
 use hdov::review::ReviewParams;
-use hdov::{Mode, QueryParams, SessionParams};
+use hdov::{Database, Mode, QueryParams, Session, SessionParams};
 use hdov_storage::PolicyKind;
 
 use super::charts::{Panel, Series};
@@ -40,23 +40,47 @@ pub fn camera(width: u32, height: u32) -> Camera {
     Camera { look: Vec3::X, fov_y_deg, aspect, image_height: height }
 }
 
+/// A walk's session: VISUAL with `params`, or REVIEW with `review` too.
+pub struct WalkMethod {
+    pub params: SessionParams,
+    pub review: Option<ReviewParams>,
+}
+
+impl WalkMethod {
+    /// A fresh session of this method over `db`.
+    pub fn open<'db>(&self, db: &'db Database) -> hdov::Result<Session<'db>> {
+        match self.review {
+            None => db.session(&self.params),
+            Some(r) => db.review_session(&self.params, r),
+        }
+    }
+}
+
 /// The methods every walk compares: frustum culling alone; VISUAL (the HDoV-tree) at several η
 /// and LOD rules, and at full detail (visibility's own loss); REVIEW at two disk-cell sizes.
-pub fn methods(camera: Camera) -> Vec<(&'static str, SessionParams)> {
-    let visual = |eta: f64, lod_rule: LodRule| SessionParams {
-        query: QueryParams { eta, lod_rule, camera: Some(camera), ..QueryParams::default() },
-        ..SessionParams::default()
+pub fn methods(camera: Camera) -> Vec<(&'static str, WalkMethod)> {
+    let visual = |eta: f64, lod_rule: LodRule| WalkMethod {
+        params: SessionParams {
+            query: QueryParams { eta, lod_rule, camera: Some(camera), ..QueryParams::default() },
+            ..SessionParams::default()
+        },
+        review: None,
     };
-    let review = |review_box: f32, eyesight: f32| SessionParams {
-        method: Method::Review(ReviewParams { review_box, eyesight, fov_deg: FOV_H_DEG, ..ReviewParams::default() }),
-        query: QueryParams { camera: Some(camera), ..QueryParams::default() },
-        cache: PolicyKind::Dplru,
-        ..SessionParams::default()
+    let review = |review_box: f32, eyesight: f32| WalkMethod {
+        params: SessionParams {
+            query: QueryParams { camera: Some(camera), ..QueryParams::default() },
+            cache: PolicyKind::Dplru,
+            ..SessionParams::default()
+        },
+        review: Some(ReviewParams { review_box, eyesight, fov_deg: FOV_H_DEG, ..ReviewParams::default() }),
     };
     let screen = LodRule::default();
-    let frustum = SessionParams {
-        query: QueryParams { mode: Mode::Frustum, camera: Some(camera), ..QueryParams::default() },
-        ..SessionParams::default()
+    let frustum = WalkMethod {
+        params: SessionParams {
+            query: QueryParams { mode: Mode::Frustum, camera: Some(camera), ..QueryParams::default() },
+            ..SessionParams::default()
+        },
+        review: None,
     };
     vec![
         ("frustum culling", frustum),
@@ -115,13 +139,13 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
     ]);
     let bar = ctx.bar("walkthrough", methods.len());
     let (mut faces_series, mut cost_series) = (Vec::new(), Vec::new());
-    for (name, params) in &methods {
+    for (name, method) in &methods {
         // Once untimed (the OS file cache warm), then timed in a fresh session.
-        let mut session = db.session(params).map_err(err)?;
+        let mut session = method.open(&db).map_err(err)?;
         for &(at, look) in &path {
             session.step(at, Some(look)).map_err(err)?;
         }
-        let mut session = db.session(params).map_err(err)?;
+        let mut session = method.open(&db).map_err(err)?;
         let (mut costs, mut faces, mut psnrs, mut micros) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let (mut pages, mut loaded) = (0u64, 0u64);
         for (i, &(at, look)) in path.iter().enumerate() {
@@ -130,7 +154,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
                 + s.loaded_bytes as f64 / (DISK_MB_PER_S * 1e6) * 1e3
                 + s.faces as f64 / FACES_PER_S * 1e3;
             let psnr = match &renderer {
-                Some(r) => Some(fidelity::compare(&session.draw(r, &views[i]).map_err(err)?, &full[i]).psnr),
+                Some(r) => Some(fidelity::compare(&r.render_session(&session, &views[i]).map_err(err)?, &full[i]).psnr),
                 None => None,
             };
             steps_csv.push(&[

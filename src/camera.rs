@@ -1,5 +1,7 @@
-//! A camera: what a renderer would draw this frame. It culls answers to its view frustum and
-//! gives the screen-space error of a LOD (visibility-modulated error mode).
+//! View geometry shared by the query engine, the renderer and REVIEW: a camera (what a renderer
+//! would draw this frame), its view frustum, and the one rule for a view's basis. The query
+//! culls answers to the frustum and takes screen-space errors from the camera; the renderer
+//! projects with the same basis; REVIEW's frustum cell is built on it.
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -54,10 +56,7 @@ impl Camera {
 
     /// The view frustum from `eye` (no far plane: the camera sees to the horizon).
     pub fn frustum(&self, eye: Vec3) -> Frustum {
-        let forward = self.look.normalize();
-        let up_hint = if forward.cross(Vec3::Y).length_squared() < 1e-6 { Vec3::Z } else { Vec3::Y };
-        let right = forward.cross(up_hint).normalize();
-        let up = right.cross(forward);
+        let (forward, right, up) = basis(self.look);
         let half_v = (self.fov_y_deg.to_radians() / 2.0).tan();
         let half_h = half_v * self.aspect;
         // Inward normals of the four side planes through the eye.
@@ -69,6 +68,15 @@ impl Camera {
         ];
         Frustum { eye, planes: normals.map(|n| n.normalize()), forward }
     }
+}
+
+/// Unit forward, right and up vectors of a view along `look` (not zero): up is y unless the
+/// view looks straight up or down, then z.
+pub fn basis(look: Vec3) -> (Vec3, Vec3, Vec3) {
+    let forward = look.normalize();
+    let up_hint = if forward.cross(Vec3::Y).length_squared() < 1e-6 { Vec3::Z } else { Vec3::Y };
+    let right = forward.cross(up_hint).normalize();
+    (forward, right, right.cross(forward))
 }
 
 /// Distance from `p` to the nearest point of `b` (0 inside).

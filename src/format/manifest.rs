@@ -5,8 +5,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::params::BuildParams;
 use super::{CATALOG_FILE, FORMAT_VERSION, GEOMETRY_FILE, MANIFEST_FILE, TREE_FILE};
-use crate::build::BuildParams;
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::rtree::TreeStats;
@@ -132,7 +132,7 @@ impl Manifest {
         // The grid is checked with the build parameters only when they hold visibility: a
         // grid of a database without must be in bounds too before its cells are counted.
         if let Some(g) = &self.grid {
-            crate::build::params::check_grid(g, 0).map_err(|e| e.to_string())?;
+            crate::format::params::check_grid(g, 0).map_err(|e| e.to_string())?;
         }
         match self.grid {
             Some(g) if g.cell_count() as u64 != c.cells => {

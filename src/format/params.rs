@@ -1,5 +1,6 @@
 //! How a database is built: typed parameters, their documented bounds, and the one check that
-//! runs before any work.
+//! runs before any work. Plain data: the stages that use them (`dov`, `lod`, `rtree`) add their
+//! behaviour where they live, so the format names no algorithm.
 //!
 //! The parameters are recorded in `manifest.json` (names as strings there, typed here). Errors
 //! name the parameter (`page_size`, `resolution`, ...); a user interface maps it to its own word
@@ -7,13 +8,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::dov::BackendKind;
-use crate::dov::adaptive::AdaptiveSampling;
-use crate::dov::precompute::{FloorTest, Shard};
-use crate::dov::probe::RayProbing;
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
-use crate::lod::LodParams;
 use crate::rtree::TreeAlgorithm;
 use hdov_storage::{DovCodec, LayoutKind};
 
@@ -26,8 +22,9 @@ pub mod limits {
     pub const MAX_SAMPLE_POINTS: u64 = 1 << 26;
     /// Interior sample points per cell.
     pub const MAX_INTERIOR_SAMPLES: u32 = 4096;
-    /// Texels per cube-face edge.
-    pub const MAX_RESOLUTION: u32 = crate::dov::cubemap::MAX_RESOLUTION;
+    /// Texels per cube-face edge: 8192 is the 2D texture size every wgpu adapter must offer,
+    /// and a cube map of it already holds 6 · 8192² = 403 M texels.
+    pub const MAX_RESOLUTION: u32 = 8192;
     /// Smallest tree page: a node header, two entries and the page checksum.
     pub const MIN_PAGE_SIZE: u32 = 100;
     /// Largest tree page: 65,534 entries, so a node's entry count fits the V-page layouts' u16.
@@ -41,6 +38,280 @@ pub mod limits {
 /// every η ≥ 1e-4 (M = 4 does not) while returning 14–26 % fewer faces than a full 4 KiB page's
 /// 126 entries at η = 1e-3 … 8e-3.
 pub const DEFAULT_FANOUT: u32 = 16;
+
+/// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`). `Auto` takes the GPU
+/// backend on graphics hardware and the CPU ray caster otherwise: on Mesa's CPU rasterisers the
+/// ray caster measures a city several times faster (docs/dov.md, speed).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// The GPU backend on a hardware adapter, else the CPU backend.
+    #[default]
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(BackendKind::Auto),
+            "gpu" => Ok(BackendKind::Gpu),
+            "cpu" => Ok(BackendKind::Cpu),
+            _ => Err(Error::bad_param("backend", format!("'{s}': expected auto, gpu or cpu"))),
+        }
+    }
+}
+
+/// Parameters of the adaptive sampler: `seeds` spread points per cell first, at most `budget`
+/// interior points per cell in all. Written `adaptive:SEEDS:BUDGET` (`adaptive` alone is
+/// [`AdaptiveSampling::DEFAULT`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub struct AdaptiveSampling {
+    pub seeds: u32,
+    pub budget: u32,
+}
+
+impl AdaptiveSampling {
+    /// Two seeds (one point sees past one side of an occluder, two see past both more often),
+    /// at most 16 points: chosen by the audit in docs/dov.md ("Adaptive sampling").
+    pub const DEFAULT: AdaptiveSampling = AdaptiveSampling { seeds: 2, budget: 16 };
+
+    /// `1 ≤ seeds ≤ budget`.
+    pub fn new(seeds: u32, budget: u32) -> std::result::Result<Self, String> {
+        if seeds == 0 || seeds > budget {
+            return Err(format!("adaptive:{seeds}:{budget}: need 1 ≤ SEEDS ≤ BUDGET"));
+        }
+        Ok(Self { seeds, budget })
+    }
+}
+
+impl std::fmt::Display for AdaptiveSampling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "adaptive:{}:{}", self.seeds, self.budget)
+    }
+}
+
+impl std::str::FromStr for AdaptiveSampling {
+    type Err = String;
+    /// `adaptive` or `adaptive:SEEDS:BUDGET`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match parse_two_counts(s, "adaptive", "SEEDS:BUDGET")? {
+            None => Ok(Self::DEFAULT),
+            Some((seeds, budget)) => Self::new(seeds, budget),
+        }
+    }
+}
+
+/// Parses `NAME` (`None`: the defaults) or `NAME:A:B` (two counts); `shape` names the counts in
+/// errors (`SEEDS:BUDGET`).
+fn parse_two_counts(s: &str, name: &str, shape: &str) -> std::result::Result<Option<(u32, u32)>, String> {
+    let expected = || format!("'{s}': expected {name} or {name}:{shape}");
+    let Some(rest) = s.strip_prefix(name) else { return Err(expected()) };
+    if rest.is_empty() {
+        return Ok(None);
+    }
+    let count = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("'{s}': '{x}' is not a count"));
+    match rest.strip_prefix(':').and_then(|r| r.split_once(':')) {
+        Some((a, b)) => Ok(Some((count(a)?, count(b)?))),
+        None => Err(expected()),
+    }
+}
+
+impl From<AdaptiveSampling> for String {
+    fn from(a: AdaptiveSampling) -> String {
+        a.to_string()
+    }
+}
+
+impl TryFrom<String> for AdaptiveSampling {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+/// Parameters of ray probing: `points` probe points per cell, `rays` rays from each towards each
+/// unseen candidate. Written `probe:POINTS:RAYS` (`probe` alone is [`RayProbing::DEFAULT`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub struct RayProbing {
+    pub points: u32,
+    pub rays: u32,
+}
+
+impl RayProbing {
+    /// Chosen by the audit in docs/dov.md ("Ray probing").
+    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4 };
+
+    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`.
+    pub fn new(points: u32, rays: u32) -> std::result::Result<Self, String> {
+        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) {
+            return Err(format!("probe:{points}:{rays}: need 1 ≤ POINTS ≤ 4096 and 1 ≤ RAYS ≤ 4096"));
+        }
+        Ok(Self { points, rays })
+    }
+}
+
+impl std::fmt::Display for RayProbing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "probe:{}:{}", self.points, self.rays)
+    }
+}
+
+impl std::str::FromStr for RayProbing {
+    type Err = String;
+    /// `probe` or `probe:POINTS:RAYS`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match parse_two_counts(s, "probe", "POINTS:RAYS")? {
+            None => Ok(Self::DEFAULT),
+            Some((points, rays)) => Self::new(points, rays),
+        }
+    }
+}
+
+impl From<RayProbing> for String {
+    fn from(a: RayProbing) -> String {
+        a.to_string()
+    }
+}
+
+impl TryFrom<String> for RayProbing {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+/// Part `index` of `count` of a grid's cells: the contiguous cell-id range
+/// `[index·C/count, (index+1)·C/count)`. Contiguous ranges keep most corners inside one shard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "[u32; 2]", try_from = "[u32; 2]")]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl Shard {
+    /// The whole grid.
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// Part `index` of `count`; refused unless 0 ≤ index < count.
+    pub fn new(index: u32, count: u32) -> std::result::Result<Shard, String> {
+        if count == 0 || index >= count {
+            return Err(format!("{index}/{count}: need 0 ≤ I < N"));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The cell ids of this shard.
+    pub fn cells(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
+        let c = grid.cell_count() as u64;
+        let lo = c * self.index as u64 / self.count as u64;
+        let hi = c * (self.index as u64 + 1) / self.count as u64;
+        lo as usize..hi as usize
+    }
+}
+
+impl From<Shard> for [u32; 2] {
+    fn from(s: Shard) -> [u32; 2] {
+        [s.index, s.count]
+    }
+}
+
+impl TryFrom<[u32; 2]> for Shard {
+    type Error = String;
+    fn try_from([index, count]: [u32; 2]) -> std::result::Result<Shard, String> {
+        Shard::new(index, count)
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    /// `I/N` (0 ≤ I < N), as `--shard` takes it.
+    fn from_str(s: &str) -> std::result::Result<Shard, String> {
+        let (i, n) = s.split_once('/').ok_or_else(|| format!("'{s}': expected I/N"))?;
+        let index: u32 = i.trim().parse().map_err(|_| format!("'{s}': I is not a number"))?;
+        let count: u32 = n.trim().parse().map_err(|_| format!("'{s}': N is not a number"))?;
+        Shard::new(index, count)
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+/// A test that marks an object *possibly visible* from a cell although none of the cell's sample
+/// points sees it; such objects get the one-texel floor DoV.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FloorTest {
+    /// The object's box lies within this distance of the cell's box (near objects: the corners
+    /// can all be cut off from an object right next to the cell).
+    BoxWithin(f32),
+    /// Some corner of a neighbouring cell (the 4 × 4 × 4 block of corners around the cell,
+    /// clipped to the grid) sees the object: views change continuously, so an object that a
+    /// point just outside the cell sees is often seen from inside. Free in measurements: the
+    /// neighbours' corners are measured for their own cells anyway (a shard measures one extra
+    /// layer of corners around its cells).
+    NeighbourCorners,
+}
+
+impl FloorTest {
+    /// The names a build takes: `box` (the object's box meets the cell's) and `neighbours`.
+    pub const NAMES: &'static str = "box, box:MARGIN, neighbours";
+}
+
+impl std::fmt::Display for FloorTest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            FloorTest::BoxWithin(0.0) => f.write_str("box"),
+            FloorTest::BoxWithin(m) => write!(f, "box:{m}"),
+            FloorTest::NeighbourCorners => f.write_str("neighbours"),
+        }
+    }
+}
+
+impl std::str::FromStr for FloorTest {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<FloorTest, String> {
+        let margin = |m: &str| m.parse::<f32>().ok().filter(|m| m.is_finite() && *m >= 0.0);
+        match s.split_once(':') {
+            None if s == "box" => Ok(FloorTest::BoxWithin(0.0)),
+            None if s == "neighbours" => Ok(FloorTest::NeighbourCorners),
+            Some(("box", m)) => margin(m)
+                .map(FloorTest::BoxWithin)
+                .ok_or_else(|| format!("'{s}': the margin must be a finite length >= 0")),
+            _ => Err(format!("unknown test '{s}' (expected {})", FloorTest::NAMES)),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LodParams {
+    /// Target faces of a level / faces of the level before.
+    pub ratio: f32,
+    /// A chain stops once a level has at most this many faces.
+    pub min_faces: usize,
+}
+
+impl Default for LodParams {
+    fn default() -> Self {
+        Self { ratio: 0.5, min_faces: 32 }
+    }
+}
+
+/// Default of [`VisibilityParams::lod_draw_tolerance`] (the GPU backend's LOD-aware drawing): a twentieth of a texel at the face centre.
+/// Half a texel (the first guess) changes some objects' DoV by up to 10 centre texels on a
+/// generated city, because the simplifier's error is not a bound on silhouette movement and a
+/// shifted silhouette changes an area in proportion to its length; 0.05 keeps every object within
+/// the backends' agreement tolerance (0.5 % of its DoV + 2 centre texels) at R = 128 and 256
+/// (docs/dov.md, "LOD-aware drawing").
+pub const DEFAULT_LOD_TOLERANCE_TEXELS: f32 = 0.05;
 
 /// How a database was built.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -115,7 +386,7 @@ impl Default for VisibilityParams {
             dov_codec: DovCodec::F32,
             shard: None,
             zero_dov_floor: vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
-            lod_draw_tolerance: crate::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS,
+            lod_draw_tolerance: DEFAULT_LOD_TOLERANCE_TEXELS,
         }
     }
 }
@@ -130,7 +401,7 @@ impl VisibilityParams {
 impl BuildParams {
     /// Most entries per node: `fanout`, else [`DEFAULT_FANOUT`], at most what a page holds.
     pub fn max_entries(&self) -> usize {
-        let page = crate::db::tree_page::fanout(self.page_size);
+        let page = crate::format::tree_page::fanout(self.page_size);
         (self.fanout.unwrap_or(DEFAULT_FANOUT) as usize).min(page)
     }
 
@@ -138,7 +409,7 @@ impl BuildParams {
     /// sample-point limits. Costs nothing; [`crate::build()`] calls it before any work.
     pub fn check(&self, grid: Option<&ViewGrid>) -> Result<()> {
         use limits::*;
-        let fanout = crate::db::tree_page::fanout(self.page_size);
+        let fanout = crate::format::tree_page::fanout(self.page_size);
         if !(MIN_PAGE_SIZE..=MAX_PAGE_SIZE).contains(&self.page_size) || fanout < 2 {
             return Err(Error::bad_param(
                 "page_size",

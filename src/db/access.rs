@@ -1,10 +1,10 @@
-//! The query side's one way to pages: tree pages and V-pages of one layout, read for one
+//! The reader's one way to pages: tree pages and V-pages of one layout, read for one
 //! query or session through one [`PageReader`] (its read buffers and, for a session, its page
 //! cache), and counted per file.
 
-use crate::db::Database;
-use crate::db::tree_page::NodePage;
+use super::Database;
 use crate::error::{Error, Result};
+use crate::format::tree_page::NodePage;
 use hdov_storage::{CacheLimits, FileIo, LayoutCursor, LayoutKind, PageReader, PolicyKind, VEntry};
 
 /// Pages requested and read per file since the last reset.
@@ -60,6 +60,11 @@ impl<'db> Access<'db> {
     /// `limits` under `policy`: what REVIEW's searches read through.
     pub fn spatial(db: &'db Database, limits: CacheLimits, policy: PolicyKind) -> Access<'db> {
         Access { db, cursor: None, pages: PageReader::new(limits, policy) }
+    }
+
+    /// The database read.
+    pub fn db(&self) -> &'db Database {
+        self.db
     }
 
     /// The layout read ("none" for a spatial reader).

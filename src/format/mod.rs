@@ -1,0 +1,29 @@
+//! The on-disk format that the writer ([`crate::build`]) and the reader ([`crate::db`]) share:
+//! file names and kinds, the manifest, the catalog, the byte layout of a tree page, and the
+//! plain-data record of how a database was built ([`params`]). It knows bytes, names and
+//! bounds; it builds nothing and opens nothing (docs/architecture.md).
+//!
+//! ```text
+//! DB/manifest.json    format version, build parameters, counts (JSON; first key "hdov")
+//! DB/tree.pages       R-tree nodes, one per page, node id = page number (storage page file, kind TREE)
+//! DB/geometry.blob    every LOD level as a bincode mesh record (storage blob file, kind GEOM)
+//! DB/catalog.blob     objects and LOD references (storage blob file, kind CATL)
+//! ```
+//! `docs/format.md` gives every byte.
+
+pub mod catalog;
+pub mod manifest;
+pub mod params;
+pub mod tree_page;
+
+pub use manifest::{Counts, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
+
+/// 2: the catalog holds node shapes (the stop rule's inputs).
+pub const FORMAT_VERSION: u32 = 2;
+pub const MANIFEST_FILE: &str = "manifest.json";
+pub const TREE_FILE: &str = "tree.pages";
+pub const GEOMETRY_FILE: &str = "geometry.blob";
+pub const CATALOG_FILE: &str = "catalog.blob";
+pub const TREE_KIND: [u8; 4] = *b"TREE";
+pub const GEOMETRY_KIND: [u8; 4] = *b"GEOM";
+pub const CATALOG_KIND: [u8; 4] = *b"CATL";

@@ -1,0 +1,189 @@
+//! The house as drawn in docs/architecture.md: every module of the library imports only modules
+//! of lower layers (read from its `crate::` paths, comments left out), the command line only the
+//! library's face, and the storage crate nothing of the library. A new module must be given its
+//! layer here and in the picture.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// Layers, bottom first: a module may import the modules of lower layers only (not those of its
+/// own layer, nor above). The same table is drawn in docs/architecture.md.
+const LAYERS: &[&[&str]] = &[
+    &["error", "geom", "progress"],
+    &["record", "grid", "camera", "rtree"],
+    &["scene"],
+    &["format", "city", "gfx"],
+    &["lod"],
+    &["dov"],
+    &["db"],
+    &["build", "query"],
+    &["review", "render"],
+];
+
+fn layer_of(module: &str) -> Option<usize> {
+    LAYERS.iter().position(|l| l.contains(&module))
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// `text` without `//` comments (doc comments included) and string literals, so that prose and
+/// messages naming a module do not count as imports.
+fn code_of(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        let mut in_string = false;
+        let mut prev = '\0';
+        let chars: Vec<char> = line.chars().collect();
+        let mut i = 0;
+        while i < chars.len() {
+            let c = chars[i];
+            if !in_string && c == '/' && chars.get(i + 1) == Some(&'/') {
+                break;
+            }
+            if c == '"' && prev != '\\' {
+                in_string = !in_string;
+            } else if !in_string {
+                out.push(c);
+            }
+            prev = c;
+            i += 1;
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The top-level modules that `code` names through `crate::` paths, including grouped imports
+/// such as `use crate::{db::Database, error::{Error, Result}}`.
+fn crate_paths(code: &str) -> BTreeSet<String> {
+    let mut found = BTreeSet::new();
+    let mut rest = code;
+    while let Some(at) = rest.find("crate::") {
+        let before = rest[..at].chars().last();
+        rest = &rest[at + "crate::".len()..];
+        if before.is_some_and(|c| c.is_alphanumeric() || c == '_') {
+            continue; // e.g. `hdov_crate::`
+        }
+        let rest_trim = rest.trim_start();
+        if let Some(group) = rest_trim.strip_prefix('{') {
+            // The names at the group's top level (depth 0) start each comma-separated part.
+            let mut depth = 0;
+            let mut part_start = true;
+            for (i, c) in group.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' if depth == 0 => break,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => part_start = true,
+                    c if part_start && (c.is_alphanumeric() || c == '_') => {
+                        let name: String =
+                            group[i..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+                        found.insert(name);
+                        part_start = false;
+                    }
+                    _ => {}
+                }
+            }
+        } else {
+            let name: String = rest_trim.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            found.insert(name);
+        }
+    }
+    found
+}
+
+/// The top-level module a file of `src/` belongs to (`src/dov/cpu/mod.rs` → `dov`).
+fn module_of(src: &Path, file: &Path) -> String {
+    let rel = file.strip_prefix(src).unwrap();
+    let first = rel.components().next().unwrap().as_os_str().to_string_lossy().into_owned();
+    first.trim_end_matches(".rs").to_string()
+}
+
+#[test]
+fn modules_import_only_lower_layers() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut violations = Vec::new();
+    let mut modules = BTreeSet::new();
+    for file in &files {
+        let module = module_of(&src, file);
+        if module == "lib" || module == "main" || module == "cli" {
+            continue;
+        }
+        modules.insert(module.clone());
+        let Some(layer) = layer_of(&module) else {
+            violations.push(format!("{module} ({}) has no layer in LAYERS", file.display()));
+            continue;
+        };
+        let code = code_of(&std::fs::read_to_string(file).unwrap());
+        for used in crate_paths(&code) {
+            // Root re-exports of the error type are the error module's.
+            if used == module || used == "Error" || used == "Result" {
+                continue;
+            }
+            match layer_of(&used) {
+                Some(l) if l < layer => {}
+                Some(l) => violations.push(format!(
+                    "{}: {module} (layer {layer}) imports {used} (layer {l})",
+                    file.strip_prefix(&src).unwrap().display()
+                )),
+                None => violations.push(format!("{}: imports crate::{used}, which has no layer", file.display())),
+            }
+        }
+    }
+    assert!(violations.is_empty(), "imports against docs/architecture.md:\n{}", violations.join("\n"));
+    // Every layer named is a module that exists (the table stays true to the tree).
+    for m in LAYERS.iter().flat_map(|l| l.iter()) {
+        assert!(modules.contains(*m), "LAYERS names {m}, which src/ does not have");
+    }
+}
+
+#[test]
+fn the_command_line_uses_the_library_face_only() {
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/cli");
+    let mut files = vec![Path::new(env!("CARGO_MANIFEST_DIR")).join("src/main.rs")];
+    rust_files(&cli, &mut files);
+    for file in files {
+        let code = code_of(&std::fs::read_to_string(&file).unwrap());
+        // `crate::` in the binary means the binary itself: only its own `cli` module.
+        for used in crate_paths(&code) {
+            assert_eq!(used, "cli", "{} reaches crate::{used}", file.display());
+        }
+    }
+    let lib = code_of(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs")).unwrap());
+    assert!(!lib.contains("mod cli"), "the library must not contain the command line");
+}
+
+#[test]
+fn storage_knows_no_geometry() {
+    let storage = Path::new(env!("CARGO_MANIFEST_DIR")).join("storage");
+    let manifest = std::fs::read_to_string(storage.join("Cargo.toml")).unwrap();
+    for dep in ["hdov =", "hdov=", "glam", "wgpu", "obvhs", "meshopt"] {
+        assert!(!manifest.contains(dep), "storage/Cargo.toml depends on {dep}");
+    }
+    let mut files = Vec::new();
+    rust_files(&storage.join("src"), &mut files);
+    for file in files {
+        let code = code_of(&std::fs::read_to_string(&file).unwrap());
+        assert!(!code.contains("hdov::"), "{} uses the library", file.display());
+    }
+}
+
+#[test]
+fn the_import_reader_reads_grouped_paths() {
+    let code = code_of(
+        "use crate::{db::{Database, access::Access}, error::Result};\n// crate::render in a comment\nlet s = \"crate::review\";\nuse crate::geom::Aabb;",
+    );
+    let found: Vec<String> = crate_paths(&code).into_iter().collect();
+    assert_eq!(found, ["db", "error", "geom"]);
+}
