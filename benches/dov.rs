@@ -1,5 +1,5 @@
 //! DoV measurement speed: sample points per second for both backends, rays per second per thread
-//! for the CPU backend, on a generated block of 20 × 20 buildings (tests/dov_common).
+//! for the CPU backend, on a generated block of 20 × 20 buildings (`hdov_testkit::scenes`).
 //!
 //! `cargo bench --bench dov` (short default run: 10 samples per benchmark).
 
@@ -8,9 +8,6 @@ use std::time::Duration;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use hdov::dov::{CpuBackend, DovBackend, GpuBackend, IdCube};
-
-#[path = "../tests/dov_common/mod.rs"]
-mod dov_common;
 
 fn street_points() -> Vec<Vec3> {
     (0..16).map(|k| Vec3::new(17.0 + 20.0 * (k % 4) as f32 * 4.0, 1.7, 3.0 + 23.0 * (k / 4) as f32 * 4.0)).collect()
@@ -32,7 +29,7 @@ fn bench_backend(c: &mut Criterion, label: &str, backend: &mut dyn DovBackend) {
 
 fn dov_benches(c: &mut Criterion) {
     // 20 × 20 buildings on a ground slab: 401 objects; the viewpoints are at eye height in streets.
-    let scene = dov_common::city_block(20, false);
+    let scene = hdov_testkit::scenes::city_block(20, false);
     for r in [128, 256] {
         let mut cpu = CpuBackend::new(&scene, r).unwrap();
         println!("backend: {}", cpu.name());

@@ -1,6 +1,6 @@
 //! Query engine speed: warm point queries per mode and layout, walkthrough steps with and without
 //! a cell flip, and cold point queries (OS page cache dropped before each one when running as
-//! root), on the default city built at R = 64 with fan-out 16 (`benches/query_common`). The
+//! root), on the default city built at R = 64 with fan-out 16 (`hdov_testkit::bench`). The
 //! large city is measured too when `HDOV_BENCH_LARGE=1`.
 //!
 //! `cargo bench --bench query` (about a minute per city once the database is cached; building
@@ -17,8 +17,7 @@ use hdov::city::CityScale;
 use hdov::{Database, Mode, QueryParams, SessionParams};
 use hdov_storage::{LayoutKind, PolicyKind, ReadMode};
 
-mod query_common;
-use query_common as common;
+use hdov_testkit::bench as common;
 
 /// Benchmark group names: `query/...` for the default city, `query-large/...` for the large.
 fn prefix(scale: CityScale) -> String {

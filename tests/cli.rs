@@ -95,7 +95,7 @@ fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
         more += p.len() - c.len();
     }
     eprintln!("probing added {more} objects over 6 cells");
-    if hdov::dov::gpu::adapter_or_skip() {
+    if hdov_testkit::gpu::adapter_or_skip() {
         let gpu = build("gpu", &["--backend", "gpu", "--samples", "probe:8:2"]);
         assert_eq!(gpu["build"]["visibility"]["probe"], "probe:8:2");
     }
@@ -566,7 +566,7 @@ fn render_writes_a_png_and_reports_fidelity() {
     assert_refused(&render(&["--size", "0x10"]), "--size");
     assert_refused(&render(&["--color", "rainbow"]), "rainbow");
     assert_refused(&hdov(&["render", &db, "--at", "115,1.8,105", "--look", "0,0,0"]), "--look");
-    if !hdov::dov::gpu::adapter_or_skip() {
+    if !hdov_testkit::gpu::adapter_or_skip() {
         return;
     }
     let out = s("answer.png");

@@ -1,7 +1,5 @@
 //! The database directory: round trips of every file, and refusal of damaged ones.
 
-mod dov_common;
-
 use std::path::Path;
 
 use glam::Mat4;
@@ -14,7 +12,7 @@ use hdov::{BuildParams, Database};
 use hdov_storage::PageReader;
 
 fn town(n: usize) -> Scene {
-    dov_common::town(n, 3)
+    hdov_testkit::scenes::town(n, 3)
 }
 
 fn build(dir: &Path, params: &BuildParams) -> hdov::BuildReport {

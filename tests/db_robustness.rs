@@ -8,8 +8,6 @@
 //! on half the rounds, so that the decoders behind the checksums are exercised), and a manifest
 //! field that only describes the build (timings, statistics, parameters used no more).
 
-mod dov_common;
-
 use std::fs;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
@@ -36,9 +34,9 @@ const CATALOG: &str = "catalog.blob";
 const MANIFEST: &str = "manifest.json";
 const PAGE_SIZE: usize = 256;
 
-/// The shared test town (`dov_common::town`) under a grid of `dims` cells.
+/// The shared test town (`hdov_testkit::scenes::town`) under a grid of `dims` cells.
 fn town(n: usize, dims: [u32; 3]) -> Scene {
-    let mut scene = dov_common::town(n, 2);
+    let mut scene = hdov_testkit::scenes::town(n, 2);
     let extent = n as f32 * 20.0;
     let region = Aabb::new(Vec3::new(-2.0, 1.5, -2.0), Vec3::new(extent - 1.0, 2.0, extent - 1.0));
     scene.grid = Some(ViewGrid::new(region, dims));

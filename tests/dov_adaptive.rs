@@ -2,16 +2,15 @@
 //! (src/dov/probe.rs) — against dense interior sampling on small random scenes of boxes behind
 //! walls, and inside a build.
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
 use hdov::dov::adaptive::AdaptiveSampling;
-use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard};
+use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
+use hdov_testkit::audit::dense_cells;
+use hdov_testkit::scenes::*;
 use proptest::prelude::*;
 
 /// 2 × 1 × 2 cells of 2 × 0.5 × 2 at eye height around the origin.

@@ -4,14 +4,13 @@
 //!
 //! `cargo test --release --test dov_audit -- --ignored --nocapture`
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
 use hdov::dov::CpuBackend;
-use hdov::dov::precompute::{FloorTest, audit_zero_dov};
+use hdov::dov::precompute::FloorTest;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
+use hdov_testkit::audit::audit_zero_dov;
+use hdov_testkit::scenes::*;
 
 #[test]
 #[ignore = "slow audit; run with --ignored --release"]

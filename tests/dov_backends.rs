@@ -1,10 +1,8 @@
 //! The two DoV backends against analytic solid angles and against each other.
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend, GpuBackend, IdCube, NO_OBJECT, cubemap};
+use hdov_testkit::scenes::*;
 
 #[test]
 fn texel_weights_sum_to_four_pi() {

@@ -3,8 +3,10 @@
 
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::{CpuBackend, DovBackend, DovDiff, GpuBackend, gpu::adapter_or_skip};
+use hdov::dov::{CpuBackend, DovBackend, GpuBackend};
 use hdov::rtree::{RTree, TreeAlgorithm};
+use hdov_testkit::audit::DovDiff;
+use hdov_testkit::gpu::adapter_or_skip;
 
 const R: u32 = 48;
 

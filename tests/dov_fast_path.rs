@@ -6,11 +6,9 @@
 //! t), instances of one mesh next to world-space copies, a flattened (two-sided, singular) box,
 //! and viewpoints on faces or within the near distance of them.
 
-mod dov_common;
-
-use dov_common::*;
 use glam::{Mat4, Vec3};
 use hdov::dov::{CpuBackend, DovBackend, IdCube};
+use hdov_testkit::scenes::*;
 use proptest::prelude::*;
 
 /// One object of a random scene: a box from lattice corner `min` with lattice size `size`.

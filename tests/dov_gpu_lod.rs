@@ -1,10 +1,11 @@
 //! LOD-aware drawing of the GPU backend against full detail on a generated city.
 
 use hdov::city::{CityParams, CityScale, generate};
-use hdov::dov::gpu::{GpuOptions, adapter_or_skip};
+use hdov::dov::gpu::GpuOptions;
 use hdov::dov::{DovBackend, GpuBackend};
 use hdov::lod::{LodLevel, LodParams, leaf_chain};
 use hdov::scene::Scene;
+use hdov_testkit::gpu::adapter_or_skip;
 
 fn city(scale: CityScale) -> (Scene, Vec<Vec<LodLevel>>) {
     let scene = generate(&CityParams { scale, ..Default::default() }).unwrap();

@@ -2,15 +2,13 @@
 //! (the flat path): the CPU backend's two-level BVH (instances traced in model space), and the
 //! GPU backend's instanced drawing (model-space meshes, per-instance transforms in the shader).
 
-mod dov_common;
-
-use dov_common::*;
 use glam::{Mat4, Quat, Vec3, Vec4};
 use hdov::dov::gpu::GpuOptions;
 use hdov::dov::{BACK_FACE_BIT, CpuBackend, DovBackend, GpuBackend, IdCube, NO_OBJECT};
 use hdov::geom::max_scale;
 use hdov::lod::{LodLevel, LodParams, leaf_chain, transformed};
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
+use hdov_testkit::scenes::*;
 
 /// Instances of one icosphere and one cube around the origin under varied transforms: plain
 /// translations, random rotations, non-uniform scales, and mirroring scales (one or three negative

@@ -1,15 +1,12 @@
 //! From-region DoV over a view grid: shared corners, max of sums, NVO, zero-DoV floor, shards.
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
-use hdov::dov::precompute::{
-    CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, audit_zero_dov, cell_dov, precompute_shard,
-};
+use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, cell_dov, precompute_shard};
 use hdov::dov::{CpuBackend, CubeMap, DovBackend, IdCube, PointDov};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
+use hdov_testkit::audit::audit_zero_dov;
+use hdov_testkit::scenes::*;
 
 /// Wraps a backend and records every point it is asked to measure.
 struct Counting<B> {

@@ -3,11 +3,9 @@
 //! DoV under sub-texel jitter of the viewpoint, for widths from 0.25 to 8 texels (numbers in
 //! docs/dov.md: `cargo test --test dov_stability -- --nocapture`).
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
+use hdov_testkit::scenes::*;
 
 /// `(width in texels, mean DoV / analytic, coefficient of variation)` for each width.
 fn pole_jitter(widths: &[f32]) -> Vec<(f32, f64, f64)> {

@@ -1,12 +1,10 @@
 //! Occlusion on both backends: hidden objects get 0, a one-texel hole shows one texel, the DoVs of
 //! one point never sum above 1.
 
-mod dov_common;
-
-use dov_common::*;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, DovBackend, GpuBackend};
 use hdov::scene::Scene;
+use hdov_testkit::scenes::*;
 
 type Make = dyn FnMut(&Scene, u32) -> Box<dyn DovBackend>;
 

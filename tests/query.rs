@@ -1,8 +1,6 @@
 //! The query engine: point queries in every mode against the rules they promise, and
 //! walkthrough sessions.
 
-mod dov_common;
-
 use std::collections::BTreeSet;
 use std::path::Path;
 
@@ -20,7 +18,7 @@ use hdov_storage::{LayoutKind, PolicyKind};
 /// A block of 5 × 5 buildings with poles and low walls in the streets, a 4 × 1 × 4 grid over
 /// the streets at eye height, fan-out 4 (a tree of several levels).
 fn city(dir: &Path) -> Database {
-    let mut scene = dov_common::city_block(5, true);
+    let mut scene = hdov_testkit::scenes::city_block(5, true);
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
     build(&scene, dir, 4)
 }
@@ -130,7 +128,7 @@ fn world_error(db: &Database, item: &hdov::Item, lod: usize) -> f64 {
 fn the_screen_error_rule_picks_the_coarsest_level_within_its_pixels() {
     let tmp = tempfile::tempdir().unwrap();
     // Instanced balls (several levels each) among boxes (one level).
-    let mut scene = dov_common::town(5, 4);
+    let mut scene = hdov_testkit::scenes::town(5, 4);
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
     let db = build(&scene, &tmp.path().join("db"), 4);
     let camera = Camera { look: Vec3::X, fov_y_deg: 50.0, aspect: 1.5, image_height: 400 };

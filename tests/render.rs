@@ -2,8 +2,6 @@
 //! against the η = 0 answer at full detail, PSNR by hand, and the coverage an η = 10⁻³ answer
 //! keeps on a small city.
 
-mod dov_common;
-
 use std::collections::BTreeSet;
 use std::path::Path;
 
@@ -20,7 +18,7 @@ use hdov::{BuildParams, Database, ItemKind, LodRule, Mode, QueryParams, Visibili
 /// A block of 5 × 5 buildings with poles and low walls, a 4 × 1 × 4 grid at eye height,
 /// fan-out 4 (as tests/query.rs).
 fn city(dir: &Path) -> Database {
-    let mut scene = dov_common::city_block(5, true);
+    let mut scene = hdov_testkit::scenes::city_block(5, true);
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
     let params = BuildParams {
         fanout: Some(4),
@@ -45,7 +43,7 @@ fn street_views() -> Vec<(Vec3, Vec3)> {
 
 #[test]
 fn a_box_covers_the_pixels_it_projects_to() {
-    if !hdov::dov::gpu::adapter_or_skip() {
+    if !hdov_testkit::gpu::adapter_or_skip() {
         return;
     }
     let renderer = Renderer::new().unwrap();
@@ -117,7 +115,7 @@ fn at_lod_zero(db: &Database, eye: Vec3, view: &View) -> hdov::Answer {
 
 #[test]
 fn full_detail_equals_an_answer_at_lod_zero() {
-    if !hdov::dov::gpu::adapter_or_skip() {
+    if !hdov_testkit::gpu::adapter_or_skip() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -214,7 +212,7 @@ fn coverage_difference_by_hand() {
 
 #[test]
 fn an_eta_of_one_in_a_thousand_keeps_psnr_and_coverage() {
-    if !hdov::dov::gpu::adapter_or_skip() {
+    if !hdov_testkit::gpu::adapter_or_skip() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

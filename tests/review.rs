@@ -1,8 +1,6 @@
 //! REVIEW, the spatial baseline: CSearch and the box query against brute force over every
 //! object box, REVIEW walks whose loads and evictions add up, and prefetch.
 
-mod dov_common;
-
 use std::collections::BTreeSet;
 use std::path::Path;
 
@@ -140,7 +138,7 @@ fn cells_follow_the_formulas() {
 
 /// The block of 5 × 5 buildings of tests/query.rs, fan-out 4.
 fn city(dir: &Path) -> Database {
-    let mut scene = dov_common::city_block(5, true);
+    let mut scene = hdov_testkit::scenes::city_block(5, true);
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
     let params = BuildParams {
         fanout: Some(4),

@@ -23,7 +23,7 @@ use std::collections::HashSet;
 
 use glam::Vec3;
 
-use super::precompute::{halton3, is_inside};
+use super::sampling::{halton3, is_inside, seen_by};
 use super::{DovBackend, PointDov};
 use crate::error::Result;
 pub use crate::format::params::AdaptiveSampling;
@@ -53,8 +53,7 @@ pub fn sample_cell(
     let extent = cell.extent();
     let axes = long_axes(extent);
     let budget = sampling.budget as usize;
-    let mut seen: HashSet<u32> =
-        known.iter().filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect();
+    let mut seen: HashSet<u32> = seen_by(known.iter().copied());
     // Cell-relative positions in [0, 1]³ already taken (the corners included), so that children
     // of neighbouring finders do not measure one place twice.
     let mut placed: Vec<Vec3> =
@@ -207,7 +206,7 @@ mod tests {
             0 => p.x < 2.2 && p.x > 0.5,
             _ => p.x > 2.6 && p.x < 3.2 && p.z > 1.5,
         });
-        let seeds_only: Vec<Vec3> = (1..=2).map(|k| cell().min + halton3(k) * cell().extent()).collect();
+        let seeds_only: Vec<Vec3> = (1..=2).map(|k| crate::dov::sampling::halton_point(&cell(), k)).collect();
         assert!(seeds_only.iter().all(|p| !(p.x > 2.6 && p.x < 3.2 && p.z > 1.5)));
         let (out, _) = run(&mut b, AdaptiveSampling::new(2, 16).unwrap());
         assert!(out.iter().any(|d| d.get(1) > 0.0));

@@ -71,7 +71,7 @@ impl Default for GpuOptions<'_> {
     }
 }
 
-pub use crate::gfx::{REQUIRE_ADAPTER_ENV, adapter_available, adapter_or_skip, hardware_adapter_available};
+pub use crate::gfx::{adapter_available, hardware_adapter_available};
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -495,21 +495,6 @@ fn used_positions(mesh: &Mesh) -> Vec<Vec3> {
         }
     }
     out
-}
-
-/// What the world-space layout this backend replaced uploaded for `scene`: every object's
-/// triangles (and, with `lods`, every coarser level of them) as three unshared 16-byte vertices
-/// (position + id). For reporting the saving; nothing draws from it.
-pub fn baked_upload_bytes(scene: &Scene, lods: Option<&[Vec<LodLevel>]>) -> u64 {
-    let triangles: u64 = scene
-        .objects
-        .iter()
-        .map(|o| {
-            let coarser = lods.map_or(0, |lods| lods[o.mesh as usize].iter().skip(1).map(|l| l.faces() as u64).sum());
-            scene.meshes[o.mesh as usize].mesh.triangle_count() as u64 + coarser
-        })
-        .sum();
-    triangles * 3 * std::mem::size_of::<crate::gfx::Vertex>() as u64
 }
 
 fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {

@@ -1,5 +1,5 @@
 //! Degree of visibility (DoV): how much of the sphere of directions around a point each object
-//! covers, measured by cubic projection (thesis §5.5.2, DESIGN.md §3).
+//! covers, measured by cubic projection (thesis §5.5.2; docs/dov.md, "The measurement").
 //!
 //! - [`cubemap`]: texel centres and solid-angle weights shared by both backends;
 //! - [`DovBackend`]: renders an *id cube* (one object id per texel) around a point; two
@@ -15,6 +15,7 @@ pub mod cubemap;
 pub mod gpu;
 pub mod precompute;
 pub mod probe;
+pub mod sampling;
 
 use std::collections::HashMap;
 
@@ -142,60 +143,6 @@ impl PointDov {
     }
 }
 
-/// Per-object differences between two measurements of the same points (two backends, or one
-/// backend with and without an approximation), for tests and experiment tools.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct DovDiff {
-    /// Objects compared: seen by either measurement.
-    pub objects: usize,
-    pub max_abs: f64,
-    pub sum_abs: f64,
-    /// Largest |Δ| / max(a, b).
-    pub max_rel: f64,
-    pub sum_rel: f64,
-    /// Objects seen by one measurement only.
-    pub flips: usize,
-    /// Objects whose difference exceeds the backend-agreement tolerance: 0.5 % of the DoV plus
-    /// two centre texels.
-    pub over_tolerance: usize,
-}
-
-impl DovDiff {
-    /// Adds one object's two values; `texel` is the centre-texel weight (`CubeMap::texel_floor`).
-    /// Objects that neither measurement sees are not counted.
-    pub fn add(&mut self, a: f64, b: f64, texel: f64) {
-        if a == 0.0 && b == 0.0 {
-            return;
-        }
-        let delta = (a - b).abs();
-        self.objects += 1;
-        self.max_abs = self.max_abs.max(delta);
-        self.sum_abs += delta;
-        self.max_rel = self.max_rel.max(delta / a.max(b));
-        self.sum_rel += delta / a.max(b);
-        self.flips += usize::from((a == 0.0) != (b == 0.0));
-        self.over_tolerance += usize::from(delta > 0.005 * a.max(b) + 2.0 * texel);
-    }
-
-    /// Adds every object either point measurement sees.
-    pub fn add_points(&mut self, a: &PointDov, b: &PointDov, texel: f64) {
-        let mut ids: Vec<u32> = a.objects.iter().chain(&b.objects).map(|e| e.0).collect();
-        ids.sort_unstable();
-        ids.dedup();
-        for id in ids {
-            self.add(a.get(id), b.get(id), texel);
-        }
-    }
-
-    pub fn mean_abs(&self) -> f64 {
-        self.sum_abs / self.objects.max(1) as f64
-    }
-
-    pub fn mean_rel(&self) -> f64 {
-        self.sum_rel / self.objects.max(1) as f64
-    }
-}
-
 /// Up to `n` grid corners in open space (the backend sees no surface from behind there), spread
 /// evenly over the grid's corners: street sample points for experiments. Measures about `12·n`
 /// corners.
@@ -303,7 +250,7 @@ pub fn open_backend(
 ) -> Result<Box<dyn DovBackend>> {
     if !(1..=4096).contains(&resolution) {
         return Err(crate::Error::bad_param(
-            "--resolution",
+            "resolution",
             format!("{resolution} is outside 1..=4096 texels per face edge"),
         ));
     }

@@ -1,4 +1,4 @@
-//! From-region DoV for every cell of a view grid (thesis §5.2, §5.5; DESIGN.md §3).
+//! From-region DoV for every cell of a view grid (thesis §5.2, §5.5; docs/dov.md, "From-region DoV").
 //!
 //! Per cell, the sample points are its 8 corners (shared with the neighbouring cells and measured
 //! once each) plus, optionally, K interior points. Then:
@@ -20,6 +20,7 @@ use glam::Vec3;
 
 use super::adaptive::{AdaptiveSampling, sample_cell};
 use super::probe::{RayProbing, probe_cell};
+use super::sampling::{interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Result};
 pub use crate::format::params::{FloorTest, Shard};
@@ -172,16 +173,6 @@ pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usi
 /// again at 30 % more rays (docs/dov.md, "Ray probing").
 pub const PROBE_CANDIDATE_RING: u32 = 2;
 
-/// The objects that the points outside geometry see.
-fn seen_by<'a>(points: impl Iterator<Item = &'a PointDov>) -> HashSet<u32> {
-    points.filter(|p| !is_inside(p)).flat_map(|p| p.objects.iter().map(|e| e.0)).collect()
-}
-
-/// Whether a sample point's view counts (see [`PrecomputeOptions::skip_inside_points`]).
-pub(crate) fn is_inside(p: &PointDov) -> bool {
-    p.back_face > 0.5
-}
-
 /// The output of one shard.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ShardDov {
@@ -194,25 +185,6 @@ pub struct ShardDov {
     /// Rays cast by [`PrecomputeOptions::probe`] towards targets, and to measure footprints.
     pub probe_rays: u64,
     pub footprint_rays: u64,
-}
-
-/// The `k`-th (k ≥ 1) point of the Halton sequence in bases 2, 3, 5, in [0, 1)³.
-pub fn halton3(k: u32) -> Vec3 {
-    fn radical_inverse(mut k: u32, base: u32) -> f32 {
-        let (mut inv, mut f) = (0.0f64, 1.0f64 / base as f64);
-        while k > 0 {
-            inv += f * (k % base) as f64;
-            k /= base;
-            f /= base as f64;
-        }
-        inv as f32
-    }
-    Vec3::new(radical_inverse(k, 2), radical_inverse(k, 3), radical_inverse(k, 5))
-}
-
-/// The `count` interior sample points of a cell box (see [`PrecomputeOptions::interior_samples`]).
-pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
-    (1..=count).map(|k| cell.min + halton3(k) * cell.extent()).collect()
 }
 
 /// Computes the [`CellDov`] of every cell of `shard`.
@@ -419,129 +391,4 @@ pub fn cell_dov(
 /// `d` as f32, never rounded down to 0 (an entry that exists means "visible") and never above 1.
 fn positive_f32(d: f64) -> f32 {
     (d as f32).clamp(f32::MIN_POSITIVE, 1.0)
-}
-
-/// Where the reference points of [`dense_cells`] start in the Halton sequence: far from the
-/// points 1, 2, … that the samplers take, so no sampler point is also a reference point.
-pub const DENSE_HALTON_START: u32 = 1001;
-
-/// The reference from-region DoV of each cell in `cells`: the max over its 8 corners and `dense`
-/// Halton points ([`DENSE_HALTON_START`] on), without floors, points inside geometry left out as
-/// in [`precompute_shard`]. Node entries use `shape`. Costs one measurement per distinct corner
-/// plus `dense` per cell.
-pub fn dense_cells(
-    backend: &mut dyn DovBackend,
-    grid: &ViewGrid,
-    object_bounds: &[Aabb],
-    shape: &TreeShape,
-    cells: impl IntoIterator<Item = usize>,
-    dense: u32,
-) -> Result<Vec<CellDov>> {
-    let cube = backend.cube_map().clone();
-    let options = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
-    let mut corners: HashMap<usize, PointDov> = HashMap::new();
-    let mut out = Vec::new();
-    for id in cells {
-        let coords = grid.cell_coords(id);
-        let cell = grid.cell_box(coords);
-        for c in grid.cell_corners(coords) {
-            if let Entry::Vacant(slot) = corners.entry(c) {
-                slot.insert(backend.measure(grid.corner_position(grid.corner_coords(c)))?);
-            }
-        }
-        let interior: Vec<PointDov> = (DENSE_HALTON_START..DENSE_HALTON_START + dense)
-            .map(|k| backend.measure(cell.min + halton3(k) * cell.extent()))
-            .collect::<Result<_>>()?;
-        let points: Vec<&PointDov> = grid.cell_corners(coords).iter().map(|c| &corners[c]).chain(&interior).collect();
-        out.push(cell_dov(&points, &[], &cell, object_bounds, shape, &options, &cube));
-    }
-    Ok(out)
-}
-
-/// How well sparse sampling and a floor test match dense sampling, over some cells.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ZeroDovAudit {
-    /// Interior points used besides the corners (the first K of the dense Halton points).
-    pub interior_samples: u32,
-    /// The floor test evaluated.
-    pub test: FloorTest,
-    pub cells: usize,
-    /// (cell, object) pairs seen by some sparse sample point (corners + K interior).
-    pub sparse_visible: usize,
-    /// Pairs seen by some dense interior point but by no sparse point: the visible zero-DoV
-    /// objects.
-    pub zero_dov: usize,
-    /// Of those, how many the floor test catches.
-    pub caught: usize,
-    /// Pairs the floor test adds that no dense point sees either (harmless over-fetching).
-    pub false_floors: usize,
-}
-
-/// Measures, for each cell in `cells`, which objects `dense` Halton interior points see that the
-/// sparse sample points (corners + the first K Halton points, for each K in `interior_samples`)
-/// do not, and how many of those each floor test in `tests` catches: one [`ZeroDovAudit`] per
-/// (K, test), K-major. Points inside geometry (more than half back faces) are left out, as
-/// [`precompute_shard`] does by default. Costs one measurement per distinct corner of the cells'
-/// neighbourhoods plus `dense` per cell.
-pub fn audit_zero_dov(
-    backend: &mut dyn DovBackend,
-    grid: &ViewGrid,
-    object_bounds: &[Aabb],
-    cells: impl IntoIterator<Item = usize>,
-    dense: u32,
-    interior_samples: &[u32],
-    tests: &[FloorTest],
-) -> Result<Vec<ZeroDovAudit>> {
-    let mut audits: Vec<ZeroDovAudit> = interior_samples
-        .iter()
-        .flat_map(|&k| tests.iter().map(move |&test| (k, test)))
-        .map(|(interior_samples, test)| ZeroDovAudit {
-            interior_samples,
-            test,
-            cells: 0,
-            sparse_visible: 0,
-            zero_dov: 0,
-            caught: 0,
-            false_floors: 0,
-        })
-        .collect();
-    let mut seen_from = |p: Vec3| -> Result<HashSet<u32>> {
-        let d = backend.measure(p)?;
-        Ok(if is_inside(&d) { HashSet::new() } else { d.objects.iter().map(|e| e.0).collect() })
-    };
-    let mut corner_seen: HashMap<usize, HashSet<u32>> = HashMap::new();
-    for id in cells {
-        let coords = grid.cell_coords(id);
-        let cell_box = grid.cell_box(coords);
-        let hood = neighbourhood_corners(grid, coords, 1);
-        for &c in &hood {
-            if let Entry::Vacant(slot) = corner_seen.entry(c) {
-                slot.insert(seen_from(grid.corner_position(grid.corner_coords(c)))?);
-            }
-        }
-        let own = grid.cell_corners(coords);
-        let by_corner: HashSet<u32> = own.iter().flat_map(|c| &corner_seen[c]).copied().collect();
-        let around: HashSet<u32> = hood.iter().flat_map(|c| &corner_seen[c]).copied().collect();
-        let interior: Vec<HashSet<u32>> =
-            interior_points(&cell_box, dense).into_iter().map(&mut seen_from).collect::<Result<_>>()?;
-        let by_dense: HashSet<u32> = interior.iter().flatten().chain(&by_corner).copied().collect();
-        for audit in &mut audits {
-            let k = (audit.interior_samples as usize).min(interior.len());
-            let sparse: HashSet<u32> = interior[..k].iter().flatten().chain(&by_corner).copied().collect();
-            audit.cells += 1;
-            audit.sparse_visible += sparse.len();
-            for (object, bounds) in object_bounds.iter().enumerate() {
-                let object = object as u32;
-                if sparse.contains(&object) {
-                    continue;
-                }
-                let floored = audit.test.finds(object, bounds, &cell_box, &around);
-                let seen = by_dense.contains(&object);
-                audit.zero_dov += seen as usize;
-                audit.caught += (seen && floored) as usize;
-                audit.false_floors += (floored && !seen) as usize;
-            }
-        }
-    }
-    Ok(audits)
 }

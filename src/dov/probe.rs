@@ -28,7 +28,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
-use super::precompute::halton3;
+use super::sampling::{halton_point, halton3};
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
 pub use crate::format::params::RayProbing;
 use crate::geom::Aabb;
@@ -146,7 +146,7 @@ fn inside_test_directions() -> impl Iterator<Item = Vec3> {
 }
 
 /// Whether `p` sees mostly back faces (inside a closed mesh): such points are left out, as
-/// [`super::precompute::PrecomputeOptions::skip_inside_points`] leaves out measured ones.
+/// [`super::sampling::is_inside`] leaves out measured ones.
 fn is_inside(rays: &dyn RayCaster, p: Vec3) -> bool {
     let (mut back, mut hits) = (0, 0);
     for d in inside_test_directions() {
@@ -180,7 +180,7 @@ pub fn probe_cell(
     bounds: &[Aabb],
     probing: &RayProbing,
 ) -> CellProbe {
-    let points: Vec<Vec3> = (1..=probing.points).map(|k| cell.min + halton3(k) * cell.extent()).collect();
+    let points: Vec<Vec3> = (1..=probing.points).map(|k| halton_point(cell, k)).collect();
     let outside: Vec<bool> = points.par_iter().map(|&p| !is_inside(rays, p)).collect();
     let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize };
     let mut cast = 26 * points.len() as u64;

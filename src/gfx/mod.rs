@@ -14,9 +14,6 @@ use wgpu::util::DeviceExt;
 use crate::error::{Error, Result};
 use crate::scene::Mesh;
 
-/// Environment variable that makes the GPU tests fail instead of skip when no adapter exists.
-pub const REQUIRE_ADAPTER_ENV: &str = "HDOV_REQUIRE_ADAPTER";
-
 /// One vertex: a position relative to the drawing's origin, and the id of what it belongs to.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -62,25 +59,6 @@ pub fn adapter_available() -> Option<String> {
 /// lavapipe, WARP).
 pub fn hardware_adapter_available() -> bool {
     request_adapter().is_ok_and(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
-}
-
-/// For tests: `true` when a GPU test can run. Without an adapter it prints
-/// `skipped: no adapter (TEST)` and returns `false`, unless [`REQUIRE_ADAPTER_ENV`] is `1`, in
-/// which case it panics (CI sets it after installing Mesa, so a missing driver cannot pass
-/// silently).
-pub fn adapter_or_skip() -> bool {
-    if adapter_available().is_some() {
-        return true;
-    }
-    if std::env::var(REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") {
-        panic!("no wgpu adapter, and {REQUIRE_ADAPTER_ENV}=1 requires one");
-    }
-    // Written to the stderr handle itself, not through `eprintln!`, which the test harness
-    // captures and hides for passing tests: a skip must show in `cargo test`'s output.
-    use std::io::Write;
-    let test = std::thread::current().name().unwrap_or("a GPU test").to_string();
-    let _ = writeln!(std::io::stderr(), "skipped: no adapter ({test})");
-    false
 }
 
 /// The adapter. `WGPU_BACKEND` (e.g. `gl`, `vulkan`) picks the backend; otherwise the native

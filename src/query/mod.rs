@@ -281,7 +281,7 @@ impl Database {
     ///
     /// Errors (one line, naming the parameter): `at` not finite or outside the grid, η outside
     /// [0, 1], a bad camera, a layout the database lacks, a database without visibility. An η
-    /// below the resolution floor (one centre texel, DESIGN §3) is answered with a warning.
+    /// below the resolution floor (one centre texel, docs/dov.md, "The measurement") is answered with a warning.
     /// Costs the pages it reads (counted in [`Answer::stats`]): a cell flip, then one tree page
     /// and one V-page per node the traversal enters.
     pub fn query(&self, at: Vec3, params: &QueryParams) -> Result<Answer> {

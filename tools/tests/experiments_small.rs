@@ -49,7 +49,7 @@ fn small_scale_writes_every_csv_and_chart_with_sane_numbers() {
     cfg.progress = false;
     let summary = run(cfg).expect("the harness runs");
     assert!(summary.contains("Machine:"), "{summary}");
-    let gpu = hdov::gfx::adapter_or_skip();
+    let gpu = hdov_testkit::gpu::adapter_or_skip();
 
     let mut charts = vec!["storage", "caching", "query_eta", "scalability", "walkthrough", "precompute", "stability"];
     if gpu {

@@ -17,7 +17,8 @@ use obvhs::{
     ray::Ray,
 };
 
-use super::{NODE_TMIN, RayTriangle};
+use super::bvh::RayTriangle;
+use super::trace::NODE_TMIN;
 
 /// AVX2 registers of `f32` per lane vector.
 const HALVES: usize = 2;

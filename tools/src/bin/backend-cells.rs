@@ -6,10 +6,11 @@
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
 use hdov::dov::precompute::{CellDov, PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::{CpuBackend, DovBackend, DovDiff, GpuBackend};
+use hdov::dov::{CpuBackend, DovBackend, GpuBackend};
 use hdov::format::tree_page::fanout;
 use hdov::lod::{LodParams, leaf_chain};
 use hdov::rtree::{RTree, TreeAlgorithm};
+use hdov_testkit::audit::DovDiff;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

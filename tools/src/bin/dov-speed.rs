@@ -70,7 +70,7 @@ fn measure_all(b: &mut dyn DovBackend, at: &[glam::Vec3]) -> hdov::Result<(f64, 
 }
 /// Max and mean |ΔDoV| over every object either backend sees, and how many that is.
 fn agreement(a: &[PointDov], b: &[PointDov]) -> (f64, f64, usize) {
-    let mut d = hdov::dov::DovDiff::default();
+    let mut d = hdov_testkit::audit::DovDiff::default();
     for (x, y) in a.iter().zip(b) {
         d.add_points(x, y, 0.0);
     }

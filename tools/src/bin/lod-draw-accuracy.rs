@@ -9,8 +9,9 @@ use std::time::Instant;
 
 use hdov::city::{CityParams, CityScale, generate};
 use hdov::dov::gpu::GpuOptions;
-use hdov::dov::{DovBackend, DovDiff, GpuBackend, PointDov, open_corners};
+use hdov::dov::{DovBackend, GpuBackend, PointDov, open_corners};
 use hdov::lod::{LodParams, leaf_chain};
+use hdov_testkit::audit::DovDiff;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

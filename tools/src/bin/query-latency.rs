@@ -16,9 +16,7 @@ use hdov::city::CityScale;
 use hdov::{Database, QueryParams, SessionParams};
 use hdov_storage::{LayoutKind, PolicyKind};
 
-#[path = "../../../benches/query_common/mod.rs"]
-mod query_common;
-use query_common as common;
+use hdov_testkit::bench as common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

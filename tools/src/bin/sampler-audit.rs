@@ -24,22 +24,18 @@
 //! in the build. Misses are also counted among pairs whose dense DoV is ≥ 4 centre texels. With
 //! `HDOV_AUDIT_MISSES=1` the tool also prints every missed pair and the misses by size.
 
-#[path = "../../../tests/dov_common/mod.rs"]
-mod dov_common;
-
 use std::time::Instant;
 
 use glam::Vec3;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::adaptive::AdaptiveSampling;
-use hdov::dov::precompute::{
-    CellDov, DENSE_HALTON_START, FloorTest, PrecomputeOptions, Shard, TreeShape, dense_cells, precompute_shard,
-};
+use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::scene::Scene;
+use hdov_testkit::audit::{DENSE_HALTON_START, dense_cells};
 
 /// One row of the table: a way of sampling.
 #[derive(Clone, Copy, Debug)]
@@ -94,14 +90,14 @@ impl Sampler {
 /// 10 units from the grid's far edge; behind it 40 posts and boxes, 0.1–0.8 wide, then a back
 /// wall. The ground is a slab. Returns the scene and its grid (4 × 1 × 4 cells of 2 × 0.5 × 2).
 fn fence_scene(r: u32) -> (Scene, ViewGrid) {
-    let mut b = dov_common::SceneBuilder::default();
+    let mut b = hdov_testkit::scenes::SceneBuilder::default();
     b.aabox(Vec3::new(-30.0, -1.0, -10.0), Vec3::new(40.0, 0.0, 50.0));
     let grid = ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.5, 0.0), Vec3::new(8.0, 2.0, 8.0)), [4, 1, 4]);
     let fence_z = 18.0;
     // One texel at the face centre, seen from the grid's middle (z = 4): 2/R radians.
     let texel = (fence_z - 4.0) * 2.0 / r as f32;
     let widths = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
-    let mut rng = dov_common::Rng(7);
+    let mut rng = hdov_testkit::scenes::Rng(7);
     let (mut x, mut i) = (-20.0f32, 0);
     while x < 28.0 {
         let w = widths[i % widths.len()] * texel;
@@ -200,7 +196,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect::<Result<_, _>>()?;
     let (scene, grid) = match scene_name {
         "audit" => (
-            dov_common::city_block(6, true),
+            hdov_testkit::scenes::city_block(6, true),
             ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
         ),
         "fence" => fence_scene(r),

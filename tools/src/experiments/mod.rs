@@ -11,9 +11,6 @@ pub mod charts;
 pub mod precompute;
 pub mod query;
 pub mod scalability;
-/// Scenes built in code (the DoV tests' kit, shared rather than copied).
-#[path = "../../../tests/dov_common/mod.rs"]
-pub mod scenes;
 pub mod stability;
 pub mod storage;
 pub mod walkthrough;

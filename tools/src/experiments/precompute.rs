@@ -7,12 +7,14 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hdov::city::CityScale;
-use hdov::dov::precompute::{FloorTest, PrecomputeOptions, TreeShape, audit_zero_dov, cell_dov, interior_points};
+use hdov::dov::precompute::{FloorTest, PrecomputeOptions, TreeShape, cell_dov};
+use hdov::dov::sampling::interior_points;
 use hdov::dov::{CpuBackend, DovBackend, GpuBackend, PointDov};
 
 use super::charts::{Panel, Series};
-use super::scenes::{sphere_dov, sphere_scene};
 use super::{Csv, Ctx, Result, Scale, err, mean};
+use hdov_testkit::audit::audit_zero_dov;
+use hdov_testkit::scenes::{sphere_dov, sphere_scene};
 
 pub fn run(ctx: &mut Ctx) -> Result<()> {
     let small = ctx.cfg.scale == Scale::Small;
@@ -56,7 +58,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         if gpu_available {
             // The other backend at the first cell's corners.
             let mut gpu = GpuBackend::new(&scene, r).map_err(err)?;
-            let mut d = hdov::dov::DovDiff::default();
+            let mut d = hdov_testkit::audit::DovDiff::default();
             let first = grid.cell_coords(cells[0]);
             for (i, &c) in grid.cell_corners(first).iter().enumerate() {
                 let g = gpu.measure(grid.corner_position(grid.corner_coords(c))).map_err(err)?;
@@ -149,7 +151,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
                 // A sphere in 8 directions, off the face centres and across face edges.
                 let mut rel = Vec::new();
                 for i in 0..8 {
-                    let dir = hdov::dov::precompute::halton3(i + 1) * 2.0 - Vec3::ONE;
+                    let dir = hdov::dov::sampling::halton3(i + 1) * 2.0 - Vec3::ONE;
                     let centre = dir.normalize_or(Vec3::X) * d;
                     let scene = sphere_scene(5, centre, 1.0);
                     let mut b: Box<dyn DovBackend> = match backend {

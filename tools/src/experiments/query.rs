@@ -132,7 +132,7 @@ const FOV_Y_DEG: f32 = 45.0;
 pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
     let renderer = match Renderer::new() {
         Ok(r) => r,
-        Err(e) if std::env::var(hdov::gfx::REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") => return Err(err(e)),
+        Err(e) if std::env::var(hdov_testkit::gpu::REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") => return Err(err(e)),
         Err(e) => {
             eprintln!("skipped: no adapter ({e})");
             ctx.note("- `accuracy`: skipped, no wgpu adapter");

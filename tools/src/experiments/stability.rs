@@ -1,18 +1,19 @@
-//! Item 8, where the DoV measurement fails (DESIGN §3, §9): poles, bars and fences 0.25–8 texels
+//! Item 8, where the DoV measurement fails (docs/dov.md, "Sub-texel features"): poles, bars and fences 0.25–8 texels
 //! wide, a wall with a hole 0.5–8 texels wide, sparse foliage, coplanar faces, viewpoints on cell
 //! borders and sample points inside buildings. For each: the DoV of the object that matters
 //! against its analytic (or densely measured) value, averaged over sub-texel jitter of the
 //! viewpoint, and the coefficient of variation under that jitter. CPU backend at R = 64.
 
 use glam::Vec3;
-use hdov::dov::precompute::{PrecomputeOptions, TreeShape, cell_dov, halton3};
+use hdov::dov::precompute::{PrecomputeOptions, TreeShape, cell_dov};
+use hdov::dov::sampling::halton3;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend, PointDov};
 use hdov::geom::Aabb;
 use hdov::scene::Scene;
 
 use super::charts::{Panel, Series};
-use super::scenes::{Rng, SceneBuilder};
 use super::{Csv, Ctx, Result, err, mean, variance};
+use hdov_testkit::scenes::{Rng, SceneBuilder};
 
 const R: u32 = 64;
 /// Distance of the features from the viewpoint.

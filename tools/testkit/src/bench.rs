@@ -1,13 +1,10 @@
-//! The query benchmarks' fixture, shared by `benches/query.rs` and the `query-latency` tool
-//! (which includes this file by path): a generated city built once at R = 64 on the CPU backend
+//! The query benchmarks' fixture, shared by `benches/query.rs` and the `query-latency` tool: a generated city built once at R = 64 on the CPU backend
 //! with fan-out 16, cached under `<target>/bench-data/<scale>-r64-m16.hdov`, and the viewpoints
 //! the benchmarks query.
 //!
 //! `<target>` is `$CARGO_TARGET_DIR` when set, else the workspace's `target/`;
 //! `$HDOV_BENCH_DATA` overrides the whole folder. A cached database is reused when it opens and
 //! was built with these parameters; otherwise it is rebuilt in place (`replace = true`).
-
-#![allow(dead_code)] // Each includer uses part of it.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

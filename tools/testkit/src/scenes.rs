@@ -1,5 +1,4 @@
 //! Scenes built in code for the DoV tests: tessellated spheres, boxes, walls with holes.
-#![allow(dead_code)]
 
 use glam::{Mat4, Vec3};
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
@@ -172,7 +171,7 @@ pub fn box_field(count: usize, seed: u64, rotated: bool) -> Scene {
 
 /// Whether GPU tests should run here (prints `skipped: no adapter` otherwise).
 pub fn gpu_or_skip() -> bool {
-    hdov::dov::gpu::adapter_or_skip()
+    crate::gpu::adapter_or_skip()
 }
 
 /// A block of `n × n` buildings (boxes 14 × 14, heights 10..70, on a 20 pitch: streets 6 wide)

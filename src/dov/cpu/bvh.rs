@@ -1,0 +1,196 @@
+//! The CPU backend's two-level BVH: one bottom level per base mesh that two or more objects
+//! instance, one over the world-space triangles of every other object, and the triangles with
+//! their edges precomputed for the ray test.
+
+use std::time::Duration;
+
+use glam::{Affine3A, Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    aabb::Aabb as BvhAabb,
+    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    ray::Ray,
+    triangle::Triangle,
+};
+
+use super::trace::Hit;
+use crate::dov::{NO_OBJECT, check_object_count};
+use crate::error::Result;
+use crate::scene::Scene;
+
+/// The largest BLAS built with obvhs's very slow preset; bigger ones get the slow preset.
+const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;
+
+/// What one BLAS is built from.
+pub(super) enum BlasSource {
+    /// World-space triangles of these objects.
+    World(Vec<usize>),
+    /// A base mesh in model space.
+    Mesh(usize),
+}
+
+/// One bottom-level BVH and its triangles in the BVH's primitive order (no indirection while
+/// tracing).
+pub(super) struct Blas {
+    pub(super) bvh: CwBvh,
+    pub(super) triangles: Vec<RayTriangle>,
+    /// Object index of each triangle: filled for the world-space BLAS, empty for a base mesh's
+    /// (its instance carries the object).
+    pub(super) objects: Vec<u32>,
+}
+
+/// One primitive of the top level.
+pub(super) struct Instance {
+    pub(super) blas: u32,
+    /// The object, or [`NO_OBJECT`] for the world-space BLAS (objects per triangle).
+    pub(super) object: u32,
+    /// World → model space; `None` for the world-space BLAS.
+    pub(super) to_model: Option<Affine3A>,
+}
+
+impl Blas {
+    /// The hit on triangle `i` at `t` through instance `inst` (number `ii`), seen from behind
+    /// (`back`) or not. The back-face test is done in the triangle's own space: with n the
+    /// model-space normal and M the linear part of the transform, the world normal of the
+    /// (winding-corrected) world triangle is |det M|·M⁻ᵀn, so its sign against M·d is the sign of
+    /// n·d.
+    #[inline(always)]
+    pub(super) fn hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, back: bool) -> Hit {
+        let obj = if inst.object == NO_OBJECT { self.objects[i] } else { inst.object };
+        Hit { t, obj, back, instance: ii as u32, tri: i as u32 }
+    }
+
+    /// The hit of `ray` (in this BLAS's space) on triangle `i` at `t`.
+    #[inline(always)]
+    pub(super) fn ray_hit(&self, inst: &Instance, ii: usize, i: usize, t: f32, ray: &Ray) -> Hit {
+        self.hit(inst, ii, i, t, self.triangles[i].seen_from_behind(ray.direction))
+    }
+}
+
+/// A triangle with the edges and normal of obvhs's Möller–Trumbore test precomputed: the test
+/// below is [`Triangle::intersect`]'s arithmetic operation for operation (so hits and `t` are
+/// bit-identical, tested), less the two edge differences and the cross product per test.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RayTriangle {
+    pub(super) v0: Vec3A,
+    /// `v0 − v1` and `v2 − v0`, the order obvhs uses.
+    pub(super) e1: Vec3A,
+    pub(super) e2: Vec3A,
+    /// `e1 × e2`: minus the counter-clockwise normal `(v1 − v0) × (v2 − v0)`, exactly (negation
+    /// is exact in floating point).
+    pub(super) n: Vec3A,
+}
+
+impl RayTriangle {
+    pub(super) fn new(t: &Triangle) -> Self {
+        let (e1, e2) = (t.v0 - t.v1, t.v2 - t.v0);
+        Self { v0: t.v0, e1, e2, n: e1.cross(e2) }
+    }
+
+    /// `t` of the hit with `tmin ≤ t ≤ tmax`, or infinity.
+    #[inline(always)]
+    pub(super) fn intersect(&self, ray: &Ray) -> f32 {
+        let c = self.v0 - ray.origin;
+        let r = ray.direction.cross(c);
+        let inv_det = 1.0 / self.n.dot(ray.direction);
+        let u = r.dot(self.e2) * inv_det;
+        let v = r.dot(self.e1) * inv_det;
+        let w = 1.0 - u - v;
+        // A sign bit in u, v or w (−0.0 included, as obvhs) is a miss.
+        let signs = u.to_bits() | v.to_bits() | w.to_bits();
+        if inv_det != 0.0 && signs & 0x8000_0000 == 0 {
+            let t = self.n.dot(c) * inv_det;
+            if t >= ray.tmin && t <= ray.tmax {
+                return t;
+            }
+        }
+        f32::INFINITY
+    }
+
+    /// Whether a ray along `dir` (in this triangle's space) sees its back: the counter-clockwise
+    /// normal points along the ray.
+    #[inline(always)]
+    pub(super) fn seen_from_behind(&self, dir: Vec3A) -> bool {
+        self.n.dot(dir) < 0.0
+    }
+}
+
+/// Builds one BLAS; `None` when it has no triangles.
+pub(super) fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
+    let (tris, objects): (Vec<Triangle>, Vec<u32>) = match source {
+        BlasSource::World(objects) => {
+            let mut tris = Vec::new();
+            let mut objs = Vec::new();
+            for &i in objects {
+                let mirrored = scene.objects[i].transform.determinant() < 0.0;
+                for t in scene.object_triangles(i) {
+                    let t = if mirrored { [t[0], t[2], t[1]] } else { t };
+                    tris.push(triangle(t));
+                    objs.push(i as u32);
+                }
+            }
+            (tris, objs)
+        }
+        BlasSource::Mesh(m) => (scene.meshes[*m].mesh.triangles().map(triangle).collect(), Vec::new()),
+    };
+    if tris.is_empty() {
+        return None;
+    }
+    // Pre-split builds: per ray, the slow preset took 33 % less time than the medium one on the
+    // default city and the very slow one 19 % less on the 110 k-triangle engine (the slow one
+    // 15 %), but the very slow build took 6.5× the medium one on the city's 2.2 M triangles
+    // (the slow 2.5×): the very slow one only where it stays cheap (docs/decisions.md, 42).
+    let params = if tris.len() <= VERY_SLOW_BUILD_MAX_TRIANGLES {
+        BvhBuildParams::very_slow_build()
+    } else {
+        BvhBuildParams::slow_build()
+    };
+    let bvh = build_cwbvh_from_tris(&tris, params, &mut Duration::default());
+    let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
+    let objects =
+        if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
+    Some(Blas { bvh, triangles, objects })
+}
+
+pub(super) fn triangle(t: [Vec3; 3]) -> Triangle {
+    Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }
+}
+
+/// World → model space of an affine, invertible transform whose inverse is finite; `None` for
+/// any other (such objects are traced in world space, as the flat BVH did).
+pub(super) fn inverse_affine(m: &glam::Mat4) -> Option<Affine3A> {
+    if m.row(3) != glam::Vec4::W {
+        return None;
+    }
+    let a = Affine3A::from_mat4(*m);
+    let det = a.matrix3.determinant();
+    if !(det.is_finite() && det.abs() > 1e-20) {
+        return None;
+    }
+    let inv = a.inverse();
+    inv.is_finite().then_some(inv)
+}
+
+/// An instance's world box grown by a little more than rounding, so that a ray whose model-space
+/// hit lies on the mesh's boundary still enters the box in world space.
+pub(super) fn padded(b: crate::geom::Aabb) -> BvhAabb {
+    let pad = b.extent().max_element() * 1e-5 + b.min.abs().max(b.max.abs()).max_element() * 1e-6 + 1e-6;
+    BvhAabb::new(Vec3A::from(b.min - Vec3::splat(pad)), Vec3A::from(b.max + Vec3::splat(pad)))
+}
+
+/// Every triangle of every object in world space, objects in index order, with its object index.
+/// Mirroring transforms (negative determinant) get their winding flipped so that counter-clockwise
+/// still means "seen from outside". Fails when there are more objects than ids can carry.
+pub fn world_triangles(scene: &Scene) -> Result<(Vec<[Vec3; 3]>, Vec<u32>)> {
+    check_object_count(scene)?;
+    let mut triangles = Vec::with_capacity(scene.triangle_count() as usize);
+    let mut objects = Vec::with_capacity(triangles.capacity());
+    for (i, o) in scene.objects.iter().enumerate() {
+        let mirrored = o.transform.determinant() < 0.0;
+        for t in scene.object_triangles(i) {
+            triangles.push(if mirrored { [t[0], t[2], t[1]] } else { t });
+            objects.push(i as u32);
+        }
+    }
+    Ok((triangles, objects))
+}

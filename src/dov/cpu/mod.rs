@@ -1,0 +1,386 @@
+//! The CPU backend: one ray per texel centre, cast through a two-level BVH (obvhs CWBVHs).
+//!
+//! - Bottom level: one BVH per base mesh that two or more objects instance, in the mesh's model
+//!   space, built once and shared by its instances; plus one BVH over the world-space triangles of
+//!   every other object (meshes used once, and transforms that are not invertible affine maps),
+//!   which is exactly the flat BVH of a scene without instancing.
+//! - Top level: a BVH over the instances' world boxes.
+//!
+//! Meshes used once are not given a BLAS each: they are stored once either way, and on the large
+//! city without its instances a TLAS over 10 941 single-use meshes cost 22 % more CPU per sample
+//! point than one world-space BLAS (docs/dov.md, speed).
+//!
+//! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
+//! triangle, with an AVX2 copy of the tracer chosen at run time that takes each tile in packets of
+//! 4 × 4 rays (`packet`: one AVX2 lane per ray); [`CpuBackend::render_ids_reference`]
+//! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
+//!
+//! A ray entering an instance's box (nearer than the best hit so far) is carried into model space
+//! by the inverse transform, direction not normalised, so the ray parameter `t` is the same in
+//! every space and hits of different instances compare directly.
+
+use std::time::Duration;
+
+use glam::{Affine3A, Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh},
+};
+use rayon::prelude::*;
+
+use super::probe::{RayCaster, SurfaceTargets};
+use super::{CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_count, cubemap};
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+mod bvh;
+#[cfg(target_arch = "x86_64")]
+mod packet;
+mod trace;
+
+pub use bvh::world_triangles;
+use bvh::{Blas, BlasSource, Instance, build_blas, inverse_affine, padded};
+use trace::{TexelState, TieWindow};
+
+/// Two hits whose ray parameters differ by less than this fraction are a tie; the lower object id
+/// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
+pub const TIE_EPSILON: f32 = 1e-5;
+/// Relative depth within which two surfaces are a tie up to `f32` rounding of rays that start
+/// within about `near` of them (tests of the fast path, [`CpuBackend::surfaces_at_nearest`]).
+pub const AMBIGUOUS_DEPTH: f32 = 1e-3;
+
+/// Texels per side of the square tiles the fast path traces one after another.
+const TILE: usize = 8;
+
+/// Ray casting through a two-level BVH. Building costs O(T log T) for the T stored triangles
+/// (each instanced base mesh once, BLASes built in parallel) plus O(I log I) for I instances;
+/// each [`DovBackend::render_ids`] casts 6·R² rays, in parallel on rayon's pool.
+pub struct CpuBackend {
+    cube: CubeMap,
+    near: f32,
+    tlas: Option<CwBvh>,
+    /// In the TLAS's primitive order.
+    instances: Vec<Instance>,
+    blases: Vec<Blas>,
+    /// Triangles of the scene with instances counted each time (for [`DovBackend::name`]).
+    triangle_count: u64,
+    /// Whether `render_ids` runs [`CpuBackend::trace_band_wide`].
+    wide: bool,
+    /// Whether [`CpuBackend::trace_band_wide`] traces packets of rays (else one ray at a time).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    packets: bool,
+    /// Where probe rays aim ([`super::probe`]).
+    targets: SurfaceTargets,
+}
+
+impl CpuBackend {
+    /// Builds the BVHs over `scene` at `resolution` texels per face edge, with the near plane of
+    /// [`super::default_near`].
+    pub fn new(scene: &Scene, resolution: u32) -> Result<Self> {
+        Self::with_near(scene, resolution, super::default_near(&scene.bounds()))
+    }
+
+    /// As [`CpuBackend::new`] with an explicit near distance (surfaces nearer than `near` along a
+    /// face's forward axis are ignored, exactly as the GPU backend's near plane clips them).
+    pub fn with_near(scene: &Scene, resolution: u32, near: f32) -> Result<Self> {
+        check_resolution_and_near(resolution, near)?;
+        check_object_count(scene)?;
+        // Which objects are instanced: an invertible affine transform of a mesh two or more such
+        // objects share. Every other object goes into the world-space BLAS.
+        let to_model: Vec<Option<Affine3A>> = scene.objects.iter().map(|o| inverse_affine(&o.transform)).collect();
+        let mut uses = vec![0u32; scene.meshes.len()];
+        for (o, inv) in scene.objects.iter().zip(&to_model) {
+            if inv.is_some() && scene.meshes[o.mesh as usize].mesh.triangle_count() > 0 {
+                uses[o.mesh as usize] += 1;
+            }
+        }
+        let instanced = |i: usize| to_model[i].is_some() && uses[scene.objects[i].mesh as usize] >= 2;
+        let world: Vec<usize> = (0..scene.objects.len()).filter(|&i| !instanced(i)).collect();
+        let mut sources = Vec::new();
+        let mut mesh_blas = vec![u32::MAX; scene.meshes.len()];
+        if !world.is_empty() {
+            sources.push(BlasSource::World(world));
+        }
+        for (m, &n) in uses.iter().enumerate() {
+            if n >= 2 {
+                mesh_blas[m] = sources.len() as u32;
+                sources.push(BlasSource::Mesh(m));
+            }
+        }
+        // The world-space BLAS (the biggest, usually) starts first; the obvhs builds are parallel
+        // inside too.
+        let blases: Vec<Option<Blas>> = sources.par_iter().map(|s| build_blas(scene, s)).collect();
+
+        let mut instances = Vec::new();
+        let mut boxes = Vec::new();
+        let mut blas_index = vec![u32::MAX; blases.len()];
+        let mut kept = Vec::new();
+        for (i, b) in blases.into_iter().enumerate() {
+            if let Some(b) = b {
+                blas_index[i] = kept.len() as u32;
+                kept.push(b);
+            }
+        }
+        if let Some(BlasSource::World(_)) = sources.first()
+            && blas_index[0] != u32::MAX
+        {
+            instances.push(Instance { blas: blas_index[0], object: NO_OBJECT, to_model: None });
+            boxes.push(kept[blas_index[0] as usize].bvh.total_aabb);
+        }
+        let mesh_boxes: Vec<crate::geom::Aabb> = scene.meshes.iter().map(|m| m.mesh.bounds()).collect();
+        for (i, o) in scene.objects.iter().enumerate() {
+            if !instanced(i) {
+                continue;
+            }
+            let b = blas_index[mesh_blas[o.mesh as usize] as usize];
+            instances.push(Instance { blas: b, object: i as u32, to_model: to_model[i] });
+            boxes.push(padded(mesh_boxes[o.mesh as usize].transformed(&o.transform)));
+        }
+        let tlas = if instances.is_empty() {
+            None
+        } else {
+            let tlas = build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default());
+            let mut slots: Vec<Option<Instance>> = instances.into_iter().map(Some).collect();
+            instances =
+                tlas.primitive_indices.iter().map(|&i| slots[i as usize].take().expect("one leaf each")).collect();
+            Some(tlas)
+        };
+        Ok(Self {
+            cube: CubeMap::new(resolution),
+            near,
+            tlas,
+            instances,
+            blases: kept,
+            triangle_count: scene.triangle_count(),
+            wide: wide_instructions(),
+            packets: true,
+            targets: SurfaceTargets::new(scene),
+        })
+    }
+
+    pub fn near(&self) -> f32 {
+        self.near
+    }
+
+    /// Lets `render_ids` use the AVX2 build of its tracer where the CPU has one (the default), or
+    /// keeps it to the portable build (tests compare both; the ids are the same).
+    pub fn set_wide_instructions(&mut self, on: bool) {
+        self.wide = on && wide_instructions();
+    }
+
+    /// Lets the AVX2 build trace packets of 4 × 4 rays (the default), or one ray at a time (the
+    /// previous fast path, kept for comparison: tests and `ray-speed`; the ids are the same).
+    pub fn set_packets(&mut self, on: bool) {
+        self.packets = on;
+    }
+}
+
+impl DovBackend for CpuBackend {
+    fn name(&self) -> String {
+        format!("cpu (obvhs CWBVH, {} triangles, {} threads)", self.triangle_count, rayon::current_num_threads())
+    }
+
+    fn resolution(&self) -> u32 {
+        self.cube.resolution()
+    }
+
+    fn cube_map(&self) -> &CubeMap {
+        &self.cube
+    }
+
+    fn ray_caster(&self) -> Option<&dyn RayCaster> {
+        Some(self)
+    }
+
+    fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        check_point(p)?;
+        check_cube(out, self.cube.resolution())?;
+        let r = self.cube.resolution() as usize;
+        let this = &*self;
+        let o = Vec3A::from(p);
+        // One rayon task per band of TILE rows of a face, traced tile by tile: neighbouring rays
+        // share BVH nodes (in cache) and, mostly, their nearest triangle (tested first).
+        let bands = out.ids.par_chunks_mut(r * r).enumerate().flat_map(|(face, ids)| {
+            ids.par_chunks_mut(r * TILE).enumerate().map(move |(band, ids)| (face, band * TILE, ids))
+        });
+        let wide = self.wide;
+        bands.for_each_init(TexelState::default, |state, (face, row0, ids)| {
+            #[cfg(target_arch = "x86_64")]
+            if wide {
+                // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+                return unsafe { this.trace_band_wide(o, face, row0, ids, state) };
+            }
+            this.trace_band::<false>(o, face, row0, ids, state);
+        });
+        Ok(())
+    }
+}
+
+impl RayCaster for CpuBackend {
+    /// [`CpuBackend::trace`]'s id among the hits within `reach`, by the fast path's traversal
+    /// (the AVX2 build where the CPU has it), `dir` scaled so that its largest component is ±1,
+    /// the texel directions' convention, so that the near plane means the same distance.
+    fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32 {
+        thread_local! {
+            static WINDOW: std::cell::RefCell<TieWindow> = std::cell::RefCell::new(TieWindow::default());
+        }
+        let scale = dir.abs().max_element();
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir / scale));
+        WINDOW.with_borrow_mut(|window| {
+            window.clear();
+            window.bound = reach * scale;
+            #[cfg(target_arch = "x86_64")]
+            if self.wide {
+                // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+                unsafe { self.traverse_all_wide(o, d, window) };
+                return window.id();
+            }
+            self.traverse_all::<false>(o, d, window);
+            window.id()
+        })
+    }
+
+    fn targets(&self) -> &SurfaceTargets {
+        &self.targets
+    }
+}
+
+/// Whether this CPU runs [`CpuBackend::trace_band_wide`] (x86-64 with AVX2, FMA, BMI1/2, LZCNT and
+/// POPCNT: every x86-64 since 2013).
+fn wide_instructions() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+pub(crate) fn check_resolution_and_near(resolution: u32, near: f32) -> Result<()> {
+    let max = super::cubemap::MAX_RESOLUTION;
+    if resolution == 0 || resolution > max {
+        return Err(Error::bad_param("resolution", format!("{resolution} is not in 1..={max}")));
+    }
+    if !(near.is_finite() && near > 0.0) {
+        return Err(Error::bad_param("near", format!("{near} must be finite and > 0")));
+    }
+    Ok(())
+}
+
+pub(crate) fn check_point(p: Vec3) -> Result<()> {
+    if p.is_finite() { Ok(()) } else { Err(Error::bad_param("point", format!("{p} is not finite"))) }
+}
+
+pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
+    let r = resolution as usize;
+    if out.resolution != resolution || out.ids.len() != cubemap::FACE_COUNT * r * r {
+        return Err(Error::bad_param(
+            "id cube",
+            format!("resolution {} does not match the backend's {resolution}", out.resolution),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bvh::RayTriangle;
+    use super::trace::Hit;
+    use super::*;
+    use obvhs::{ray::Ray, triangle::Triangle};
+    use proptest::prelude::*;
+
+    fn vec3a() -> impl Strategy<Value = Vec3A> {
+        // Small integers make degenerate, edge-on and exactly-on-edge cases common.
+        prop_oneof![
+            [-4.0f32..4.0, -4.0..4.0, -4.0..4.0].prop_map(Vec3A::from),
+            [-2i8..3, -2..3, -2..3].prop_map(|v| Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32)),
+        ]
+    }
+
+    /// Boxes of many sizes around the origin.
+    fn boxes() -> Scene {
+        use crate::dov::sampling::halton3;
+        let mut s = Scene::default();
+        for k in 1..=30 {
+            let p = (halton3(k) - Vec3::splat(0.5)) * Vec3::new(12.0, 6.0, 12.0);
+            let size = Vec3::splat(0.05) + halton3(k + 100) * 2.0;
+            s.add_box(&format!("box {k}"), p, p + size);
+        }
+        s
+    }
+
+    proptest! {
+        /// A probe ray's id (the AVX2 traversal where the CPU has it, its direction rescaled) is
+        /// the id of a plain traversal within its reach.
+        #[test]
+        fn first_hit_is_a_plain_traversal_within_reach(
+            rays in prop::collection::vec((vec3a(), vec3a(), prop_oneof![Just(f32::INFINITY), 0.1f32..10.0]), 1..40),
+        ) {
+            let scene = boxes();
+            let cpu = CpuBackend::new(&scene, 8).unwrap();
+            for (o, d, reach) in rays {
+                let scale = d.abs().max_element();
+                prop_assume!(scale > 0.0);
+                // The reach in lengths of `d`, and the bound it makes along `d / scale` (the same
+                // rounding as `first_hit`'s).
+                let reach = reach / scale;
+                let mut plain = TieWindow::default();
+                plain.clear();
+                plain.bound = reach * scale;
+                cpu.traverse_all::<false>(o, d / scale, &mut plain);
+                prop_assert_eq!(cpu.first_hit(o.into(), d.into(), reach), plain.id());
+            }
+        }
+
+        /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may
+        /// then differ in nothing but the order in which they meet triangles.
+        #[test]
+        fn ray_triangle_is_obvhs_triangle_bit_for_bit(
+            v in [vec3a(), vec3a(), vec3a()], o in vec3a(), d in vec3a(), tmin in 0.0f32..0.5, tmax in 0.5f32..20.0,
+        ) {
+            let tri = Triangle { v0: v[0], v1: v[1], v2: v[2] };
+            let ray = Ray { origin: o, direction: d, inv_direction: d.recip(), tmin, tmax };
+            prop_assert_eq!(RayTriangle::new(&tri).intersect(&ray).to_bits(), tri.intersect(&ray).to_bits());
+            // The back-face sign: e1 × e2 is minus (v1 − v0) × (v2 − v0), exactly.
+            let ccw = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
+            prop_assert_eq!(RayTriangle::new(&tri).seen_from_behind(d), ccw.dot(d) > 0.0);
+        }
+
+        /// The tie window's id does not depend on the order hits arrive in (as long as each is
+        /// within the bound at its arrival, as a traversal guarantees).
+        #[test]
+        fn tie_window_id_ignores_hit_order(
+            hits in prop::collection::vec((0u32..4, 0u32..6, any::<bool>()), 1..12), seed in any::<u64>(),
+        ) {
+            // t values 1 + k·4e-6: neighbours tie, the far ones chain beyond one window.
+            let hits: Vec<Hit> = hits
+                .iter()
+                .enumerate()
+                .map(|(i, &(k, obj, back))| Hit { t: 1.0 + k as f32 * 4e-6, obj, back, instance: 0, tri: i as u32 })
+                .collect();
+            let id = |order: &[Hit]| {
+                let mut w = TieWindow::default();
+                w.clear();
+                for h in order {
+                    if h.t <= w.bound {
+                        w.add(*h);
+                    }
+                }
+                w.id()
+            };
+            let mut shuffled = hits.clone();
+            let mut s = seed;
+            for i in (1..shuffled.len()).rev() {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                shuffled.swap(i, (s >> 33) as usize % (i + 1));
+            }
+            prop_assert_eq!(id(&hits), id(&shuffled));
+        }
+    }
+}

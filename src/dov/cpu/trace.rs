@@ -1,0 +1,524 @@
+//! The CPU backend's tracers: the reference per-ray traversal, the fast path (each ray first
+//! bounded by the previous texel's winning triangle, tile by tile) and its AVX2 build with
+//! packets of 4 × 4 rays ([`super::packet`]), and the tie window that makes every route give
+//! the same id.
+
+use glam::{UVec2, Vec3, Vec3A};
+use obvhs::{
+    cwbvh::node::{CwBvhNode, extract_byte64},
+    ray::{Ray, RayHit},
+};
+
+use super::bvh::Instance;
+#[cfg(target_arch = "x86_64")]
+use super::packet;
+use super::{AMBIGUOUS_DEPTH, CpuBackend, TIE_EPSILON, TILE, check_cube, check_point};
+use crate::dov::{BACK_FACE_BIT, IdCube, NO_OBJECT, cubemap};
+use crate::error::Result;
+
+/// What the fast path carries from one texel to the next on one thread.
+#[derive(Default)]
+pub(super) struct TexelState {
+    pub(super) window: TieWindow,
+    /// The previous texel's winning hit: instance and triangle.
+    pub(super) last: Option<(u32, u32)>,
+    #[cfg(target_arch = "x86_64")]
+    pub(super) packet: PacketState,
+}
+
+/// What the packet tracer carries from one packet to the next on one thread.
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+pub(super) struct PacketState {
+    windows: LaneWindows,
+    /// The previous packet's winning hits (instance, triangle), each once: tested first.
+    last: Vec<(u32, u32)>,
+    /// This packet's, while it is traced.
+    winners: Vec<(u32, u32)>,
+    tlas_stack: Vec<(u32, u32)>,
+    blas_stack: Vec<(u32, u32)>,
+}
+
+/// One tie window per lane of a packet, and their bounds side by side (the lanes' `tmax`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+pub(super) struct LaneWindows {
+    windows: [TieWindow; packet::LANES],
+    bounds: [f32; packet::LANES],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneWindows {
+    /// Empties every window, with the bound `bounds[l]` on lane `l`.
+    fn reset(&mut self, bounds: [f32; packet::LANES]) {
+        for (w, &b) in self.windows.iter_mut().zip(&bounds) {
+            w.clear();
+            w.bound = b;
+        }
+        self.bounds = bounds;
+    }
+
+    #[inline(always)]
+    pub(super) fn add(&mut self, lane: usize, hit: Hit) {
+        self.windows[lane].add(hit);
+        self.bounds[lane] = self.windows[lane].bound;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl packet::LaneBounds for LaneWindows {
+    #[inline(always)]
+    fn tmax(&self) -> &[f32; packet::LANES] {
+        &self.bounds
+    }
+}
+
+/// One ray-triangle hit.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Hit {
+    pub(super) t: f32,
+    pub(super) obj: u32,
+    pub(super) back: bool,
+    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
+    pub(super) instance: u32,
+    pub(super) tri: u32,
+}
+
+impl Hit {
+    /// The texel id this hit gives: its object, with [`BACK_FACE_BIT`] when seen from behind.
+    pub(super) fn id(&self) -> u32 {
+        if self.back { self.obj | BACK_FACE_BIT } else { self.obj }
+    }
+}
+
+/// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
+/// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
+/// the lowest object id in the window, its nearest triangle there, a front face before a back face
+/// at equal `t` (docs/decisions.md, 41). So any traversal order, BVH or early bound gives the id
+/// the reference tracer gives.
+#[derive(Default)]
+pub(super) struct TieWindow {
+    pub(super) hits: Vec<Hit>,
+    /// `t_near·(1 + ε)`: hits beyond it can no longer change the id (infinity while empty).
+    pub(super) bound: f32,
+    pub(super) t_near: f32,
+}
+
+impl TieWindow {
+    pub(super) fn clear(&mut self) {
+        self.hits.clear();
+        self.bound = f32::INFINITY;
+        self.t_near = f32::INFINITY;
+    }
+
+    /// Adds a hit with `t ≤ self.bound`.
+    #[inline(always)]
+    pub(super) fn add(&mut self, hit: Hit) {
+        if hit.t < self.t_near {
+            self.t_near = hit.t;
+            self.bound = hit.t * (1.0 + TIE_EPSILON);
+            let bound = self.bound;
+            self.hits.retain(|h| h.t <= bound);
+        }
+        self.hits.push(hit);
+    }
+
+    /// The winning hit, if any.
+    pub(super) fn winner(&self) -> Option<&Hit> {
+        self.hits.iter().min_by(|a, b| a.obj.cmp(&b.obj).then(a.t.total_cmp(&b.t)).then(a.back.cmp(&b.back)))
+    }
+
+    pub(super) fn id(&self) -> u32 {
+        self.winner().map_or(NO_OBJECT, Hit::id)
+    }
+}
+
+impl CpuBackend {
+    /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
+    /// among the hits with `t ≥ near`, those within [`TIE_EPSILON`] of the nearest are ties and the
+    /// lower object id wins, with [`BACK_FACE_BIT`] when its triangle faces away. The reference
+    /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
+    /// enters before its nearest hit's tie window.
+    pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
+        let mut window = TieWindow::default();
+        window.clear();
+        // Boxes beyond the tie window of the nearest hit cannot change the result.
+        self.traverse_plainly(origin, dir, |hit| {
+            window.add(hit);
+            window.bound
+        });
+        window.id()
+    }
+
+    /// One plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray enters
+    /// before the bound: `on_hit` takes each hit and returns the new bound.
+    fn traverse_plainly(&self, origin: Vec3, dir: Vec3, mut on_hit: impl FnMut(Hit) -> f32) {
+        let Some(tlas) = &self.tlas else { return };
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let mut bound = f32::INFINITY;
+        tlas.ray_traverse(Ray::new(o, d, self.near, f32::INFINITY), &mut RayHit::none(), |_, ii| {
+            let inst = &self.instances[ii];
+            let blas = &self.blases[inst.blas as usize];
+            let ray = self.instance_ray(inst, o, d, bound);
+            blas.bvh.ray_traverse(ray, &mut RayHit::none(), |ray, i| {
+                let t = blas.triangles[i].intersect(ray);
+                if t.is_finite() {
+                    bound = on_hit(blas.ray_hit(inst, ii, i, t, ray));
+                }
+                bound
+            });
+            bound
+        });
+    }
+
+    /// The ids (with [`BACK_FACE_BIT`]) of the surfaces the ray from `origin` along `dir` meets
+    /// within [`AMBIGUOUS_DEPTH`] of its nearest hit, each once. Where there are two or more, the
+    /// ray's id depends on `f32` rounding of rays that start within about `near` of a tie, and
+    /// the fast path's early culling may pick another of them than the reference tracer (tests).
+    pub fn surfaces_at_nearest(&self, origin: Vec3, dir: Vec3) -> Vec<u32> {
+        let mut hits: Vec<Hit> = Vec::new();
+        self.traverse_plainly(origin, dir, |hit| {
+            hits.push(hit);
+            f32::INFINITY
+        });
+        let nearest = hits.iter().map(|h| h.t).fold(f32::INFINITY, f32::min);
+        let mut ids: Vec<u32> = hits.iter().filter(|h| h.t <= nearest * (1.0 + AMBIGUOUS_DEPTH)).map(Hit::id).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    /// The ray of `inst`'s BLAS: the world ray, or carried into model space by the inverse
+    /// transform (direction not normalised, so `t` is the same in both spaces).
+    #[inline(always)]
+    fn instance_ray(&self, inst: &Instance, o: Vec3A, d: Vec3A, tmax: f32) -> Ray {
+        match &inst.to_model {
+            None => Ray::new(o, d, self.near, tmax),
+            Some(m) => Ray::new(m.transform_point3a(o), m.transform_vector3a(d), self.near, tmax),
+        }
+    }
+
+    /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
+    /// tested first, and its tie window bounds the traversal from the start, which then skips
+    /// every box behind it; a scene whose TLAS holds one instance (no instancing) goes straight to
+    /// its BLAS; triangles carry their precomputed edges. The id depends only on the set of hits
+    /// the BVH lets through inside the tie window, which every route finds whole, so it equals
+    /// `trace`'s. The bound is only trusted once the traversal itself reaches a hit at least as
+    /// near: a ray grazing a box edge can hit a triangle whose box test it fails (rounding), and
+    /// the reference would not see that hit; then the ray is traced again without the bound.
+    #[inline(always)]
+    fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
+        let window = &mut state.window;
+        window.clear();
+        let mut hint_t = f32::INFINITY;
+        if let Some((ii, i)) = state.last {
+            let inst = &self.instances[ii as usize];
+            let ray = self.instance_ray(inst, o, d, f32::INFINITY);
+            hint_t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
+            window.bound = hint_t * (1.0 + TIE_EPSILON);
+        }
+        self.traverse_all::<WIDE>(o, d, window);
+        if window.t_near > hint_t {
+            window.clear();
+            self.traverse_all::<WIDE>(o, d, window);
+        }
+        // A miss keeps the last hit: the next ray may well hit it.
+        if let Some(h) = window.winner() {
+            state.last = Some((h.instance, h.tri));
+        }
+        window.id()
+    }
+
+    /// Adds to `window` the hits of every instance nearer than its bound.
+    #[inline(always)]
+    pub(super) fn traverse_all<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        match &self.tlas {
+            None => {}
+            Some(_) if self.instances.len() == 1 => self.traverse_blas::<WIDE>(0, o, d, window),
+            Some(tlas) => {
+                let mut ray = Ray::new(o, d, self.near, window.bound);
+                let mut traversal = tlas.new_traversal(ray.direction);
+                let mut node;
+                obvhs::traverse!(tlas, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
+                    self.traverse_blas::<WIDE>(traversal.primitive_id as usize, o, d, window);
+                    ray.tmax = window.bound;
+                });
+            }
+        }
+    }
+
+    /// Adds to `window` the hits of instance `ii`'s BLAS nearer than its bound.
+    #[inline(always)]
+    fn traverse_blas<const WIDE: bool>(&self, ii: usize, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        let inst = &self.instances[ii];
+        let blas = &self.blases[inst.blas as usize];
+        let mut ray = self.instance_ray(inst, o, d, window.bound);
+        let mut traversal = blas.bvh.new_traversal(ray.direction);
+        let mut node;
+        obvhs::traverse!(blas.bvh, node, traversal, intersect_node::<WIDE>(node, &ray, traversal.oct_inv4), {
+            let i = traversal.primitive_id as usize;
+            let t = blas.triangles[i].intersect(&ray);
+            if t.is_finite() {
+                window.add(blas.ray_hit(inst, ii, i, t, &ray));
+                ray.tmax = window.bound;
+            }
+        });
+    }
+
+    /// The id cube from `p` by [`CpuBackend::trace`], one ray after another on the calling thread:
+    /// the straightforward tracer that [`DovBackend::render_ids`] must equal texel for texel
+    /// (tests), and the "before" of the per-ray speed figures (tools/src/bin/ray-speed.rs).
+    pub fn render_ids_reference(&self, p: Vec3, out: &mut IdCube) -> Result<()> {
+        check_point(p)?;
+        check_cube(out, self.cube.resolution())?;
+        let r = self.cube.resolution();
+        let mut ids = out.ids.iter_mut();
+        for face in 0..cubemap::FACE_COUNT {
+            for row in 0..r {
+                for col in 0..r {
+                    *ids.next().expect("checked length") = self.trace(p, self.cube.texel_direction(face, row, col));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The children of `node` that `ray` enters (obvhs's hit mask). `WIDE` (only inside
+/// [`CpuBackend::trace_band_wide`]) tests all eight children in one AVX2 pass, with the operations
+/// of obvhs's four-wide `intersect_ray_simd` lane by lane (the same products, sums, min/max and
+/// `≤`), so the same children are entered; obvhs converts the quantised bounds one byte at a
+/// time, the costliest part of its test, which AVX2 does in one instruction.
+#[inline(always)]
+fn intersect_node<const WIDE: bool>(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: WIDE is only instantiated under `trace_band_wide`, whose CPU has AVX2.
+        return unsafe { intersect_node_avx2(node, ray, oct_inv4) };
+    }
+    node.intersect_ray(ray, oct_inv4)
+}
+
+/// obvhs's lower bound on a child's entry distance (its private `EPSILON`).
+pub(super) const NODE_TMIN: f32 = 0.0001;
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn intersect_node_avx2(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    use std::arch::x86_64::*;
+    let adj_dir = node.compute_extent() * ray.inv_direction;
+    let adj_origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    // SAFETY (all intrinsics): AVX2 is present (see `intersect_node`); each load reads 8 bytes.
+    unsafe {
+        let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(b.as_ptr().cast())));
+        let slab = |lo: &[u8; 8], hi: &[u8; 8], negative: bool, dir: f32, origin: f32| {
+            let (lo, hi) = (q(lo), q(hi));
+            let (near, far) = if negative { (hi, lo) } else { (lo, hi) };
+            let (dir, origin) = (_mm256_set1_ps(dir), _mm256_set1_ps(origin));
+            (_mm256_add_ps(_mm256_mul_ps(near, dir), origin), _mm256_add_ps(_mm256_mul_ps(far, dir), origin))
+        };
+        let d = ray.direction;
+        let (tmin_x, tmax_x) = slab(&node.child_min_x, &node.child_max_x, d.x < 0.0, adj_dir.x, adj_origin.x);
+        let (tmin_y, tmax_y) = slab(&node.child_min_y, &node.child_max_y, d.y < 0.0, adj_dir.y, adj_origin.y);
+        let (tmin_z, tmax_z) = slab(&node.child_min_z, &node.child_max_z, d.z < 0.0, adj_dir.z, adj_origin.z);
+        let tmin = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+        let tmax = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+        let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_TMIN));
+        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray.tmax));
+        let mut entered = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32;
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+        let mut hit_mask = 0u32;
+        while entered != 0 {
+            let slot = entered.trailing_zeros() as usize;
+            entered &= entered - 1;
+            hit_mask |= extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot);
+        }
+        hit_mask
+    }
+}
+
+impl CpuBackend {
+    /// Traces the texels of `rows` rows (`ids.len() / R`) of `face` from `row0`, tile by tile.
+    #[inline(always)]
+    pub(super) fn trace_band<const WIDE: bool>(
+        &self,
+        o: Vec3A,
+        face: usize,
+        row0: usize,
+        ids: &mut [u32],
+        state: &mut TexelState,
+    ) {
+        let r = self.cube.resolution() as usize;
+        state.last = None;
+        let rows = ids.len() / r;
+        for col0 in (0..r).step_by(TILE) {
+            let col1 = (col0 + TILE).min(r);
+            for dr in 0..rows {
+                for col in col0..col1 {
+                    let d = self.cube.texel_direction(face, (row0 + dr) as u32, col as u32);
+                    ids[dr * r + col] = self.trace_fast::<WIDE>(o, Vec3A::from(d), state);
+                }
+            }
+        }
+    }
+
+    /// [`CpuBackend::traverse_all`] compiled as in [`CpuBackend::trace_band_wide`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    pub(super) unsafe fn traverse_all_wide(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
+        self.traverse_all::<true>(o, d, window)
+    }
+
+    /// [`CpuBackend::trace_band`] compiled for newer x86-64 CPUs, as Embree picks its kernels at
+    /// run time. The traversal counts and finds bits per node (one instruction each with POPCNT and
+    /// LZCNT, a dozen without); the arithmetic is the same operations (Rust never fuses a
+    /// multiply-add by itself), so the ids are bit-identical (tests/dov_fast_path.rs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    pub(super) unsafe fn trace_band_wide(
+        &self,
+        o: Vec3A,
+        face: usize,
+        row0: usize,
+        ids: &mut [u32],
+        state: &mut TexelState,
+    ) {
+        if self.packets {
+            self.trace_band_packets(o, face, row0, ids, state)
+        } else {
+            self.trace_band::<true>(o, face, row0, ids, state)
+        }
+    }
+
+    /// [`CpuBackend::trace_band`] by packets: each tile in blocks of [`packet::PACKET_COLS`]
+    /// columns of `LANES / PACKET_COLS` rows, one [`CpuBackend::trace_packet`] each (partial
+    /// blocks at the image's edges).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn trace_band_packets(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
+        use packet::{LANES, PACKET_COLS};
+        let r = self.cube.resolution() as usize;
+        let rows = ids.len() / r;
+        state.packet.last.clear();
+        for col0 in (0..r).step_by(TILE) {
+            let col1 = (col0 + TILE).min(r);
+            for pr in (0..rows).step_by(LANES / PACKET_COLS) {
+                for pc in (col0..col1).step_by(PACKET_COLS) {
+                    let texel = |l: usize| (pr + l / PACKET_COLS, pc + l % PACKET_COLS);
+                    let mut dirs = [Vec3A::ZERO; LANES];
+                    let mut lanes = 0u32;
+                    for (l, dir) in dirs.iter_mut().enumerate() {
+                        let (row, col) = texel(l);
+                        if row < rows && col < col1 {
+                            *dir = self.cube.texel_direction(face, (row0 + row) as u32, col as u32).into();
+                            lanes |= 1 << l;
+                        }
+                    }
+                    let lane_ids = self.trace_packet(&packet::Packet::new(o, &dirs, lanes), state);
+                    for (l, id) in lane_ids.iter().enumerate().filter(|&(l, _)| lanes & (1 << l) != 0) {
+                        let (row, col) = texel(l);
+                        ids[row * r + col] = *id;
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`CpuBackend::trace_fast`] for the lanes of a packet together: the previous packet's
+    /// winning triangles bound each lane from the start, one packet traversal finds every lane's
+    /// hits inside its bound, and a lane whose bound the traversal did not confirm (a hit it
+    /// cannot reach, see `trace_fast`) is traced again alone without it.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn trace_packet(&self, p: &packet::Packet, state: &mut TexelState) -> [u32; packet::LANES] {
+        use packet::LANES;
+        let ps = &mut state.packet;
+        let mut hint_t = [f32::INFINITY; LANES];
+        for &(ii, i) in &ps.last {
+            let inst = &self.instances[ii as usize];
+            let q = self.instance_packet(inst, p);
+            let tri = &self.blases[inst.blas as usize].triangles[i as usize];
+            let (hits, t, _) = packet::intersect_triangle(tri, &q, self.near, packet::splat(f32::INFINITY), p.lanes);
+            let t = packet::store(t);
+            for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
+                hint_t[l] = hint_t[l].min(t[l]);
+            }
+        }
+        ps.windows.reset(hint_t.map(|t| t * (1.0 + TIE_EPSILON)));
+        let PacketState { windows, last, winners, tlas_stack, blas_stack } = ps;
+        match &self.tlas {
+            None => {}
+            Some(_) if self.instances.len() == 1 => self.traverse_blas_packet(0, p, p.lanes, blas_stack, windows),
+            Some(tlas) => packet::traverse(tlas, p, p.lanes, tlas_stack, windows, |w, ii, lanes| {
+                self.traverse_blas_packet(ii, p, lanes, blas_stack, w)
+            }),
+        }
+        let mut ids = [NO_OBJECT; LANES];
+        winners.clear();
+        for l in (0..LANES).filter(|l| p.lanes & (1 << l) != 0) {
+            let window = &mut windows.windows[l];
+            if window.t_near > hint_t[l] {
+                window.clear();
+                // SAFETY: AVX2 and the rest of `wide_instructions` are present (the only caller
+                // is `trace_band_wide`).
+                unsafe { self.traverse_all_wide(p.origin, p.dirs[l], window) };
+            }
+            if let Some(h) = window.winner()
+                && !winners.contains(&(h.instance, h.tri))
+            {
+                winners.push((h.instance, h.tri));
+            }
+            ids[l] = window.id();
+        }
+        // A packet of misses keeps the last hits: the next packet may well hit them.
+        if !winners.is_empty() {
+            std::mem::swap(last, winners);
+        }
+        ids
+    }
+
+    /// Adds to each lane's window the hits of instance `ii`'s BLAS nearer than its bound.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn traverse_blas_packet(
+        &self,
+        ii: usize,
+        p: &packet::Packet,
+        lanes: u32,
+        stack: &mut Vec<(u32, u32)>,
+        windows: &mut LaneWindows,
+    ) {
+        use packet::{LANES, LaneBounds};
+        let inst = &self.instances[ii];
+        let blas = &self.blases[inst.blas as usize];
+        let q = self.instance_packet(inst, p);
+        packet::traverse(&blas.bvh, &q, lanes, stack, windows, |w, i, m| {
+            let tmax = packet::load(w.tmax());
+            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], &q, self.near, tmax, m);
+            if hits != 0 {
+                let t = packet::store(t);
+                for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
+                    w.add(l, blas.hit(inst, ii, i, t[l], back & (1 << l) != 0));
+                }
+            }
+        });
+    }
+
+    /// The packet of `inst`'s BLAS: `p`, or carried into model space lane by lane as
+    /// [`CpuBackend::instance_ray`] carries one ray.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> packet::Packet {
+        match &inst.to_model {
+            None => *p,
+            Some(m) => {
+                let dirs = p.dirs.map(|d| m.transform_vector3a(d));
+                packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes)
+            }
+        }
+    }
+}

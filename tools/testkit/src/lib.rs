@@ -1,0 +1,13 @@
+//! hdov's test kit: what the tests (`tests/`), benchmarks (`benches/`) and experiment tools
+//! (`tools/`) share, kept out of the library's public face. A dev-dependency of `hdov` and a
+//! dependency of `hdov-tools`.
+//!
+//! - [`scenes`]: scenes built in code (spheres, boxes, walls with holes, a city block, a town);
+//! - [`gpu`]: skipping GPU tests where no adapter exists, unless CI requires one;
+//! - [`audit`]: the DoV audits (backend agreement, the dense from-region reference, floor tests);
+//! - [`bench`]: the query benchmarks' database fixture and viewpoints.
+
+pub mod audit;
+pub mod bench;
+pub mod gpu;
+pub mod scenes;
