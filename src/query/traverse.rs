@@ -1,5 +1,11 @@
-//! The five ways a query walks the tree. Each reads a node's page and its V-page only when it
-//! enters the node; the V-entry that led there (its DoV) is the node's priority for the cache.
+//! How a query walks the tree. One walk ([`Traversal::walk`]) serves threshold, vmsse, naive and
+//! frustum modes; what each keeps is its [`Selection`], as rstar's selection functions are: for
+//! every entry of a node the walk entered, skip it, return it at a level (an object, or an
+//! internal node as one LOD), or descend. Budget mode shares the walk's reads and level rules but
+//! refines by sharing a face budget among siblings, which no per-entry rule expresses.
+//!
+//! A node's page and its V-page are read only when the walk enters the node; the V-entry that
+//! led there (its DoV) is the node's priority for the cache.
 
 use glam::{Mat4, Vec3};
 
@@ -34,15 +40,83 @@ pub(super) fn run(
     let mut t = Traversal { db, access, at, cell_box, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
     let mut over_budget = false;
     match params.mode {
-        Mode::Threshold | Mode::Vmsse => t.descend(0, 1.0)?,
-        Mode::Naive => t.naive()?,
+        Mode::Threshold | Mode::Vmsse => t.walk(0, 1.0, &ByVisibility)?,
+        // The visible objects of every leaf, reading only leaf V-pages (and the leaf's page for
+        // its objects), in depth-first order, at their leaf LOD.
+        Mode::Naive => {
+            let shapes = &db.catalog().node_shapes;
+            for leaf in (0..db.node_count()).filter(|&n| shapes[n as usize].level == 0) {
+                t.walk(leaf, 0.0, &ByVisibility)?;
+            }
+        }
         Mode::Frustum => {
             let frustum = params.camera.filter(|_| cull).map(|c| c.frustum(at));
-            t.frustum(0, frustum.as_ref())?
+            t.walk(0, 0.0, &InFrustum(frustum))?
         }
         Mode::Budget => over_budget = t.budget_root()?,
     }
     Ok(Found { items: t.items, nodes_visited: t.nodes_visited, over_budget })
+}
+
+/// What the walk does with one entry of an internal node.
+enum Choice {
+    Skip,
+    /// Return the child node as its internal LOD at this level.
+    Stop(usize),
+    Descend,
+}
+
+/// A query's rule for [`Traversal::walk`].
+trait Selection {
+    /// Whether the walk reads V-pages: entries then carry their DoV and NVO in the query's cell,
+    /// and a node hidden there is not entered. Without, every entry's DoV is 0.
+    fn reads_visibility(&self) -> bool;
+
+    /// The level at which to return object `o` (an entry of a leaf, DoV `d`), or `None` to skip it.
+    fn object(&self, t: &Traversal, o: u32, d: f64, mbr: &Aabb) -> Option<usize>;
+
+    /// What to do with child node `c` (DoV `d`, `nvo` visible objects).
+    fn node(&self, t: &Traversal, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Choice;
+}
+
+/// Threshold, vmsse and naive modes (thesis fig. 5.4): hidden entries are skipped, visible
+/// objects returned at their leaf level, and a subtree stops at an internal LOD where the mode's
+/// stop rule says so ([`Traversal::stop_at`]).
+struct ByVisibility;
+
+impl Selection for ByVisibility {
+    fn reads_visibility(&self) -> bool {
+        true
+    }
+
+    fn object(&self, t: &Traversal, o: u32, d: f64, mbr: &Aabb) -> Option<usize> {
+        (d > 0.0).then(|| t.leaf_level(o, d, mbr))
+    }
+
+    fn node(&self, t: &Traversal, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Choice {
+        if d <= 0.0 {
+            return Choice::Skip; // a hidden branch
+        }
+        t.stop_at(c, d, nvo, mbr).map_or(Choice::Descend, Choice::Stop)
+    }
+}
+
+/// Frustum mode: tree pages only; every object whose box meets the frustum (all of them without
+/// one), at full detail.
+struct InFrustum(Option<Frustum>);
+
+impl Selection for InFrustum {
+    fn reads_visibility(&self) -> bool {
+        false
+    }
+
+    fn object(&self, _: &Traversal, _: u32, _: f64, mbr: &Aabb) -> Option<usize> {
+        self.0.is_none_or(|f| f.meets(mbr)).then_some(0)
+    }
+
+    fn node(&self, _: &Traversal, _: u32, _: f64, _: u32, mbr: &Aabb) -> Choice {
+        if self.0.is_none_or(|f| f.meets(mbr)) { Choice::Descend } else { Choice::Skip }
+    }
 }
 
 struct Traversal<'a, 'db> {
@@ -76,24 +150,33 @@ impl Traversal<'_, '_> {
         Ok(Some((page, v)))
     }
 
-    /// Threshold and vmsse modes: thesis fig. 5.4, with the mode's stop rule.
-    fn descend(&mut self, id: u32, dov: f64) -> Result<()> {
-        let Some((page, v)) = self.enter(id, dov)? else { return Ok(()) };
-        for (e, ve) in page.node.entries.iter().zip(&v) {
-            let d = f64::from(ve.dov);
-            if d <= 0.0 {
-                continue; // a hidden branch
-            }
+    /// Enters node `id` (reached with DoV `dov`) and handles each of its entries as `sel` says,
+    /// in entry order, depth first.
+    fn walk(&mut self, id: u32, dov: f64, sel: &dyn Selection) -> Result<()> {
+        let (page, v) = if sel.reads_visibility() {
+            let Some(entered) = self.enter(id, dov)? else { return Ok(()) };
+            entered
+        } else {
+            self.nodes_visited += 1;
+            (self.access.node(id, 0.0)?, Vec::new())
+        };
+        for (k, e) in page.node.entries.iter().enumerate() {
+            let (d, nvo) = v.get(k).map_or((0.0, 0), |ve| (f64::from(ve.dov), ve.nvo));
             if page.node.is_leaf() {
-                let lod = self.leaf_level(e.child, d, &e.mbr);
-                self.push_object(e.child, lod, d, e.mbr);
-            } else if let Some(lod) = self.stop_at(e.child, d, ve.nvo, &e.mbr) {
-                self.push_node(e.child, lod, d, e.mbr);
-            } else {
-                self.descend(e.child, d)?;
+                if let Some(lod) = sel.object(self, e.child, d, &e.mbr) {
+                    self.push_object(e.child, lod, d, e.mbr);
+                }
+                continue;
+            }
+            match sel.node(self, e.child, d, nvo, &e.mbr) {
+                Choice::Skip => {}
+                Choice::Stop(lod) => self.push_node(e.child, lod, d, e.mbr),
+                Choice::Descend => self.walk(e.child, d, sel)?,
             }
         }
-        self.vpage = v;
+        if sel.reads_visibility() {
+            self.vpage = v;
+        }
         Ok(())
     }
 
@@ -187,42 +270,6 @@ impl Traversal<'_, '_> {
     fn push_node(&mut self, n: u32, lod: usize, d: f64, mbr: Aabb) {
         let lod_ref = self.db.catalog().node_lods[n as usize][lod];
         self.items.push(item(ItemKind::Node, n, format!("node {n}").into(), lod, lod_ref, d, mbr));
-    }
-
-    /// Naive mode: the visible objects of every leaf, reading only leaf V-pages (and the leaf's
-    /// page for its objects), in depth-first order, at their leaf LOD.
-    fn naive(&mut self) -> Result<()> {
-        let leaves: Vec<u32> =
-            (0..self.db.node_count()).filter(|&n| self.db.catalog().node_shapes[n as usize].level == 0).collect();
-        for leaf in leaves {
-            let Some((page, v)) = self.enter(leaf, 0.0)? else { continue };
-            for (e, ve) in page.node.entries.iter().zip(&v) {
-                let d = f64::from(ve.dov);
-                if d > 0.0 {
-                    let lod = self.leaf_level(e.child, d, &e.mbr);
-                    self.push_object(e.child, lod, d, e.mbr);
-                }
-            }
-            self.vpage = v;
-        }
-        Ok(())
-    }
-
-    /// Frustum mode: tree pages only; every object whose box meets the frustum, full detail.
-    fn frustum(&mut self, id: u32, frustum: Option<&Frustum>) -> Result<()> {
-        self.nodes_visited += 1;
-        let page = self.access.node(id, 0.0)?;
-        for e in &page.node.entries {
-            if frustum.is_some_and(|f| !f.meets(&e.mbr)) {
-                continue;
-            }
-            if page.node.is_leaf() {
-                self.push_object(e.child, 0, 0.0, e.mbr);
-            } else {
-                self.frustum(e.child, frustum)?;
-            }
-        }
-        Ok(())
     }
 
     /// Budget mode from the root: refine within `params.budget` faces; if even that does not
