@@ -8,17 +8,29 @@ pub enum Error {
     /// An I/O failure on a named file.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system said.
         #[source]
         source: std::io::Error,
     },
     /// A file whose contents are not what they must be (malformed, truncated, corrupted).
     #[error("{}: {reason}", path.display())]
-    BadFile { path: PathBuf, reason: String },
+    BadFile {
+        /// The file (or database directory).
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// A parameter that cannot be used, named as the library names it (`resolution`,
     /// `grid`, ...); a user interface maps the name to its own (the `hdov` command to a flag).
     #[error("{param}: {reason}")]
-    BadParam { param: String, reason: String },
+    BadParam {
+        /// The parameter's name in the library.
+        param: String,
+        /// Why it cannot be used.
+        reason: String,
+    },
     /// An error from the storage crate (pages, layouts).
     #[error(transparent)]
     Storage(#[from] hdov_storage::Error),
@@ -28,15 +40,19 @@ pub enum Error {
     Gpu(String),
 }
 
+/// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
+    /// An I/O failure on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io { path: path.into(), source }
     }
+    /// A malformed, truncated or corrupted file at `path`.
     pub fn bad_file(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         Error::BadFile { path: path.into(), reason: reason.into() }
     }
+    /// A parameter, named as the library names it, that cannot be used.
     pub fn bad_param(param: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::BadParam { param: param.into(), reason: reason.into() }
     }

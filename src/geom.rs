@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 /// An axis-aligned bounding box. An empty box has `min > max` on every axis.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
+    /// The lower corner.
     pub min: Vec3,
+    /// The upper corner.
     pub max: Vec3,
 }
 
@@ -17,34 +19,42 @@ impl Default for Aabb {
 }
 
 impl Aabb {
+    /// The box of nothing: unions leave the other box unchanged.
     pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
 
+    /// The box from `min` to `max`.
     pub fn new(min: Vec3, max: Vec3) -> Self {
         Self { min, max }
     }
 
+    /// The smallest box holding `points` ([`Aabb::EMPTY`] for none).
     pub fn from_points(points: impl IntoIterator<Item = Vec3>) -> Self {
         points.into_iter().fold(Self::EMPTY, |b, p| b.grow(p))
     }
 
+    /// Whether the box holds no point (some min above its max).
     pub fn is_empty(&self) -> bool {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The box grown to hold `p`.
     #[must_use]
     pub fn grow(self, p: Vec3) -> Self {
         Self { min: self.min.min(p), max: self.max.max(p) }
     }
 
+    /// The smallest box holding both.
     #[must_use]
     pub fn union(self, o: Aabb) -> Self {
         Self { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
 
+    /// The centre.
     pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5
     }
 
+    /// The side lengths.
     pub fn extent(&self) -> Vec3 {
         (self.max - self.min).max(Vec3::ZERO)
     }
@@ -54,10 +64,12 @@ impl Aabb {
         self.min.cmple(o.min).all() && self.max.cmpge(o.max).all()
     }
 
+    /// Whether `p` lies in the box (boundary included).
     pub fn contains_point(&self, p: Vec3) -> bool {
         self.min.cmple(p).all() && self.max.cmpge(p).all()
     }
 
+    /// Whether the boxes share a point (touching counts).
     pub fn intersects(&self, o: &Aabb) -> bool {
         self.min.cmple(o.max).all() && self.max.cmpge(o.min).all()
     }
@@ -88,15 +100,18 @@ impl Aabb {
         [self.min.x, self.min.y, self.min.z, self.max.x, self.max.y, self.max.z]
     }
 
+    /// The box `[min x, min y, min z, max x, max y, max z]`.
     pub fn from_array(a: [f32; 6]) -> Self {
         Self { min: Vec3::new(a[0], a[1], a[2]), max: Vec3::new(a[3], a[4], a[5]) }
     }
 
+    /// Surface area.
     pub fn surface_area(&self) -> f32 {
         let e = self.extent();
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     }
 
+    /// Volume.
     pub fn volume(&self) -> f32 {
         let e = self.extent();
         e.x * e.y * e.z

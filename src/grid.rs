@@ -8,8 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::geom::Aabb;
 
+/// A regular grid of viewing cells over a region: the cells whose visibility a database stores.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewGrid {
+    /// The box the cells tile.
     pub region: Aabb,
     /// Cells along x, y (height layers) and z.
     pub dims: [u32; 3],
@@ -20,6 +22,7 @@ impl ViewGrid {
     /// u32 with room to spare, and a mistyped grid is refused instead of allocated.
     pub const MAX_CELLS: u64 = 1 << 22;
 
+    /// A grid of `dims` cells (x, y, z) over `region`.
     pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
         Self { region, dims }
     }
@@ -68,6 +71,7 @@ impl ViewGrid {
         Ok(g)
     }
 
+    /// Checks the region and the counts; returns the reason of the first bad one.
     pub fn check(&self) -> Result<(), String> {
         let r = self.region;
         if !(r.min.is_finite() && r.max.is_finite()) || r.min.cmpgt(r.max).any() {
@@ -79,10 +83,12 @@ impl ViewGrid {
         Ok(())
     }
 
+    /// Cells in the grid.
     pub fn cell_count(&self) -> usize {
         self.dims.iter().map(|&d| d as usize).product()
     }
 
+    /// The side lengths of one cell.
     pub fn cell_size(&self) -> Vec3 {
         self.region.extent() / UVec3::from(self.dims).as_vec3()
     }
@@ -93,6 +99,7 @@ impl ViewGrid {
         (c[1] as usize * nz + c[2] as usize) * nx + c[0] as usize
     }
 
+    /// The `[i, j, k]` of cell `id`.
     pub fn cell_coords(&self, id: usize) -> [u32; 3] {
         let [nx, _, nz] = self.dims.map(|d| d as usize);
         [(id % nx) as u32, (id / (nx * nz)) as u32, ((id / nx) % nz) as u32]
@@ -118,6 +125,7 @@ impl ViewGrid {
         (0..self.cell_count()).map(|id| self.cell_box(self.cell_coords(id)).center()).collect()
     }
 
+    /// The box of cell `c`.
     pub fn cell_box(&self, c: [u32; 3]) -> Aabb {
         let s = self.cell_size();
         let min = self.region.min + UVec3::from(c).as_vec3() * s;
@@ -135,11 +143,13 @@ impl ViewGrid {
         (c[1] as usize * nz + c[2] as usize) * nx + c[0] as usize
     }
 
+    /// The `[i, j, k]` of corner `id` (corners are the cells' vertices).
     pub fn corner_coords(&self, id: usize) -> [u32; 3] {
         let [nx, _, nz] = self.dims.map(|d| d as usize + 1);
         [(id % nx) as u32, (id / (nx * nz)) as u32, ((id / nx) % nz) as u32]
     }
 
+    /// Where corner `c` lies.
     pub fn corner_position(&self, c: [u32; 3]) -> Vec3 {
         self.region.min + UVec3::from(c).as_vec3() * self.cell_size()
     }

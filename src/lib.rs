@@ -5,16 +5,15 @@
 //! visibility (DoV: visible solid angle / 4π) of every object and node, stored in V-pages beside
 //! the tree. A [`Database`] opens the result read-only through memory maps.
 //!
-//! Pipeline: [`scene`] (import, [`city`] generator) → [`rtree`] (bulk load) → [`lod`] (leaf and
-//! internal LODs) → [`dov`] (visibility per viewing cell of a [`grid`]) → [`build`] (the writer)
-//! → [`db`] (the reader; V-pages through the `hdov-storage` crate).
+//! This file chooses the public face: building ([`build()`], [`merge()`], [`BuildParams`]),
+//! reading ([`Database`], [`Info`]), asking ([`Database::query`], [`Session`], [`Answer`]),
+//! scenes ([`Scene`], the [`city`] generator), measuring DoV at a point ([`open_backend`]) and
+//! drawing answers ([`render`]). The modules behind it are private; the `internals` feature
+//! makes them public for hdov's own tests, tools and benchmarks, with no promise of stability.
+//! `docs/architecture.md` draws the layers.
 //!
 //! ```
-//! use hdov::{BuildParams, Database, Scene, VisibilityParams};
-//! use hdov::dov::BackendKind;
-//! use hdov::geom::Aabb;
-//! use hdov::grid::ViewGrid;
-//! use hdov::progress::Progress;
+//! use hdov::{Aabb, BackendKind, BuildParams, Database, Progress, Scene, ViewGrid, VisibilityParams};
 //! use glam::Vec3;
 //!
 //! // Two boxes on a ground plate (three instances of one cube mesh), and a 2 × 1 × 2 grid of
@@ -40,28 +39,44 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod build;
-pub mod camera;
+#![cfg_attr(not(feature = "internals"), deny(missing_docs))]
+// Without `internals`, whatever only the tests and tools use is unreachable from the face.
+#![cfg_attr(not(feature = "internals"), allow(dead_code, unused_imports))]
+
+/// Declares modules that are private unless the `internals` feature is on.
+macro_rules! internal_modules {
+    ($($name:ident),* $(,)?) => {
+        $(
+            #[cfg(feature = "internals")]
+            #[doc(hidden)]
+            pub mod $name;
+            #[cfg(not(feature = "internals"))]
+            mod $name;
+        )*
+    };
+}
+
+internal_modules!(build, camera, db, dov, error, format, geom, gfx, grid, lod, progress, query, record, rtree, scene);
+
 pub mod city;
-pub mod db;
-pub mod dov;
-pub mod error;
-pub mod format;
-pub mod geom;
-pub mod gfx;
-pub mod grid;
-pub mod lod;
-pub mod progress;
-pub mod query;
-pub mod record;
 pub mod render;
 pub mod review;
-pub mod rtree;
-pub mod scene;
 
-pub use build::{BuildParams, BuildReport, VisibilityParams, build, merge::merge};
+pub use build::{BuildReport, build, merge::merge};
+pub use camera::Camera;
 pub use db::Database;
 pub use db::info::Info;
+pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Result};
+pub use format::Manifest;
+pub use format::params::{
+    AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, LodParams,
+    RayProbing, Shard, VisibilityParams,
+};
+pub use geom::Aabb;
+pub use grid::ViewGrid;
+pub use hdov_storage::{CacheLimits, DovCodec, Error as StorageError, LayoutKind, PolicyKind};
+pub use progress::Progress;
 pub use query::{Answer, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
-pub use scene::Scene;
+pub use rtree::TreeAlgorithm;
+pub use scene::{Mesh, Scene};

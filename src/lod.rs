@@ -73,7 +73,7 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
                         if node.is_leaf() {
                             let o = &scene.objects[e.child as usize];
                             let coarsest = leaf[o.mesh as usize].last().expect("chains are never empty");
-                            (transformed(&coarsest.mesh, &o.transform), coarsest.error * max_scale(&o.transform))
+                            (coarsest.mesh.transformed(&o.transform), coarsest.error * max_scale(&o.transform))
                         } else {
                             let coarsest = coarsest_internal(&internal, e.child as usize);
                             (coarsest.mesh.clone(), coarsest.error)
@@ -200,13 +200,6 @@ pub fn weld(mesh: &Mesh) -> Mesh {
     }
 }
 
-pub fn transformed(mesh: &Mesh, m: &glam::Mat4) -> Mesh {
-    Mesh {
-        positions: mesh.positions.iter().map(|p| m.transform_point3((*p).into()).to_array()).collect(),
-        indices: mesh.indices.clone(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,10 +256,11 @@ mod tests {
     fn aggregate_finest_is_below_the_sum_of_parts() {
         let parts: Vec<Mesh> = (0..6)
             .map(|i| {
-                transformed(
-                    &leaf_chain(&sphere(12), &LodParams::default()).pop().unwrap().mesh,
-                    &glam::Mat4::from_translation(glam::Vec3::X * 3.0 * i as f32),
-                )
+                leaf_chain(&sphere(12), &LodParams::default())
+                    .pop()
+                    .unwrap()
+                    .mesh
+                    .transformed(&glam::Mat4::from_translation(glam::Vec3::X * 3.0 * i as f32))
             })
             .collect();
         let sum: usize = parts.iter().map(|p| p.triangle_count()).sum();

@@ -2,6 +2,7 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// Where long steps report progress: bars on a terminal, nothing otherwise.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Progress {
     visible: bool,
@@ -14,6 +15,7 @@ impl Progress {
         Self { visible: !quiet && std::io::stdout().is_terminal() }
     }
 
+    /// No bars at all.
     pub fn hidden() -> Self {
         Self { visible: false }
     }

@@ -20,6 +20,15 @@ const LAYERS: &[&[&str]] = &[
     &["review", "render"],
 ];
 
+/// The modules on the library's public face (the rest is private without `internals`).
+const PUBLIC_MODULES: &[&str] = &["city", "render", "review"];
+
+/// Whether `path` (after `hdov::`) names a root function such as `build(` or `open_backend(`.
+fn is_function(path: &str) -> bool {
+    let name: String = path.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+    path[name.len()..].starts_with('(')
+}
+
 fn layer_of(module: &str) -> Option<usize> {
     LAYERS.iter().position(|l| l.contains(&module))
 }
@@ -159,9 +168,23 @@ fn the_command_line_uses_the_library_face_only() {
         for used in crate_paths(&code) {
             assert_eq!(used, "cli", "{} reaches crate::{used}", file.display());
         }
+        // The face: root items and the public modules, never the storage crate beneath it
+        // (`.ci/run` also builds the command without the `internals` feature).
+        assert!(!code.contains("hdov_storage"), "{} reaches the storage crate", file.display());
+        for (at, _) in code.match_indices("hdov::") {
+            let module: String = code[at + 6..].chars().take_while(|c| c.is_ascii_lowercase() || *c == '_').collect();
+            assert!(
+                module.is_empty() || PUBLIC_MODULES.contains(&module.as_str()) || is_function(&code[at + 6..]),
+                "{} reaches hdov::{module}, not on the face",
+                file.display()
+            );
+        }
     }
     let lib = code_of(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs")).unwrap());
     assert!(!lib.contains("mod cli"), "the library must not contain the command line");
+    for m in PUBLIC_MODULES {
+        assert!(lib.contains(&format!("pub mod {m};")), "lib.rs does not make {m} public");
+    }
 }
 
 #[test]

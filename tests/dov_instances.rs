@@ -6,7 +6,7 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use hdov::dov::gpu::GpuOptions;
 use hdov::dov::{BACK_FACE_BIT, CpuBackend, DovBackend, GpuBackend, IdCube, NO_OBJECT};
 use hdov::geom::max_scale;
-use hdov::lod::{LodLevel, LodParams, leaf_chain, transformed};
+use hdov::lod::{LodLevel, LodParams, leaf_chain};
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 use hdov_testkit::scenes::*;
 
@@ -182,7 +182,7 @@ fn baked_lods(scene: &Scene, lods: &[Vec<LodLevel>]) -> Vec<Vec<LodLevel>> {
             lods[o.mesh as usize]
                 .iter()
                 .map(|l| {
-                    let mut mesh = transformed(&l.mesh, &m);
+                    let mut mesh = l.mesh.transformed(&m);
                     if m.determinant() < 0.0 {
                         mesh.indices.chunks_exact_mut(3).for_each(|t| t.swap(1, 2));
                     }

@@ -35,9 +35,13 @@ use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, Overwrite, PageFileWriter,
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]
 pub struct BuildReport {
+    /// The manifest written.
     pub manifest: Manifest,
+    /// Seconds spent building the tree.
     pub tree_seconds: f64,
+    /// Seconds spent building the leaf and internal LODs.
     pub lod_seconds: f64,
+    /// Seconds spent writing the files (visibility included).
     pub write_seconds: f64,
     /// Leftovers of builds that died (temporary folders beside the target), removed.
     pub cleaned: Vec<PathBuf>,

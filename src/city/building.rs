@@ -26,6 +26,7 @@ pub enum BuildingKind {
 }
 
 impl BuildingKind {
+    /// The kind's name, as reports print it.
     pub fn name(self) -> &'static str {
         match self {
             BuildingKind::House => "house",

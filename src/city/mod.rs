@@ -77,6 +77,7 @@ pub enum CityScale {
 }
 
 impl CityScale {
+    /// Every scale, smallest first.
     pub const ALL: [CityScale; 4] = [CityScale::Tiny, CityScale::Small, CityScale::Default, CityScale::Large];
 
     /// Blocks along x and z.
@@ -100,6 +101,7 @@ impl CityScale {
         }
     }
 
+    /// The scale's name, as `--scale` takes it.
     pub fn name(self) -> &'static str {
         match self {
             CityScale::Tiny => "tiny",
@@ -133,9 +135,11 @@ pub const MAX_BLOCKS: u32 = 256;
 /// What to generate.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CityParams {
+    /// Seed of the generator: equal seeds give equal cities.
     pub seed: u64,
     /// Blocks along x and z, overriding the scale's count (zeros count as one).
     pub blocks: Option<[u32; 2]>,
+    /// How big a city to generate.
     pub scale: CityScale,
     /// The dense model to instance in plazas (e.g. from `--detail-model PATH.obj`); the
     /// procedural figure when `None` or when it has no triangles or no extent.
@@ -225,8 +229,10 @@ pub enum WalkKind {
 }
 
 impl WalkKind {
+    /// Every recorded walk.
     pub const ALL: [WalkKind; 3] = [WalkKind::Straight, WalkKind::Turning, WalkKind::BackAndForth];
 
+    /// The walk's name, as `--walk` takes it.
     pub fn name(self) -> &'static str {
         match self {
             WalkKind::Straight => "straight",

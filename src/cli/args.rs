@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use hdov::geom::Aabb;
+use hdov::Aabb;
 
 fn floats(s: &str, n: usize, what: &str) -> Result<Vec<f32>, String> {
     let v: Vec<f32> = s

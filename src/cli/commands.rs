@@ -7,18 +7,10 @@ use serde_json::json;
 
 use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
-use hdov::dov::BackendKind;
-use hdov::dov::adaptive::AdaptiveSampling;
-use hdov::dov::precompute::{FloorTest, Shard};
-use hdov::dov::probe::RayProbing;
-use hdov::error::{Error, Result};
-use hdov::format::Manifest;
-use hdov::geom::Aabb;
-use hdov::grid::ViewGrid;
-use hdov::progress::Progress;
-use hdov::rtree::TreeAlgorithm;
-use hdov::{BuildParams, BuildReport, Database, Info, Scene, VisibilityParams};
-use hdov_storage::{DovCodec, LayoutKind};
+use hdov::{
+    Aabb, AdaptiveSampling, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info,
+    LayoutKind, Manifest, Progress, RayProbing, Result, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
+};
 
 #[derive(Args)]
 pub struct DemoArgs {
@@ -118,7 +110,7 @@ pub struct VisibilityArgs {
     /// GPU backend: draw an object at a coarser LOD when its simplification error, seen from the
     /// sample point, is below this many texels (0 = always full detail). 0.05 keeps every
     /// object's DoV within 0.5 % + 2 texels of full detail (docs/dov.md); the CPU backend ignores it.
-    #[arg(long, default_value_t = hdov::dov::gpu::DEFAULT_LOD_TOLERANCE_TEXELS, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = hdov::DEFAULT_LOD_TOLERANCE_TEXELS, allow_negative_numbers = true)]
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
@@ -252,17 +244,14 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
     city.detail_model = match detail {
         Some(p) => {
             let (s, _) = Scene::load(p)?;
-            let parts: Vec<_> = (0..s.objects.len())
-                .map(|i| hdov::lod::transformed(s.object_mesh(i), &s.objects[i].transform))
-                .collect();
-            Some(hdov::scene::Mesh::merged(&parts))
+            Some(s.merged_mesh())
         }
         None => None,
     };
     let scene = hdov::city::generate(&city)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let path = out.join("city.json");
-    hdov::scene::manifest::write(&scene, &path, replace)?;
+    scene.write_manifest(&path, replace)?;
     Ok(path)
 }
 
@@ -482,7 +471,7 @@ pub fn dov(a: DovArgs) -> Result<()> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    let mut backend = hdov::dov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
+    let mut backend = hdov::open_backend(&scene, a.resolution, a.backend, &Default::default())?;
     let point = backend.measure(a.at)?;
     let mut objects = point.objects.clone();
     objects.sort_by(|x, y| y.1.total_cmp(&x.1));

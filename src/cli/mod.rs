@@ -94,11 +94,11 @@ fn clap_one_line(e: &clap::Error) -> String {
 /// The library's error in the command's words: parameters become the flags that set them, and
 /// a refused target says how to replace it.
 fn user_message(e: &Error) -> String {
-    use hdov_storage::Error as S;
+    use hdov::StorageError as S;
     match e {
         Error::BadParam { param, reason } => format!("{}: {reason}", flag_of(param)),
         Error::Storage(S::Exists { .. }) => format!("{e}; pass --force to replace it"),
-        _ => hdov::error::one_line(&e.to_string()),
+        _ => e.to_string(),
     }
 }
 

@@ -8,12 +8,11 @@ use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
 use hdov::city::WalkKind;
-use hdov::error::{Error, Result};
-use hdov::query::{Camera, LodRule, Mode};
 use hdov::render::{View, fidelity};
 use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
-use hdov_storage::{LayoutKind, PolicyKind};
+use hdov::{Camera, Error, LodRule, Mode, Result};
+use hdov::{LayoutKind, PolicyKind};
 
 /// What a query returns: its mode, η, level rule and the modes' own bounds (`query`, `walk` and
 /// `render` alike).

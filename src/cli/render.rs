@@ -9,9 +9,9 @@ use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
 use hdov::Database;
-use hdov::error::{Error, Result};
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
+use hdov::{Error, Result};
 
 #[derive(Args)]
 pub struct RenderCmd {

@@ -14,24 +14,35 @@ use crate::rtree::TreeStats;
 /// A database described: counts, grid, build parameters, files and every layout's costs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Info {
+    /// The database's format version.
     pub format_version: u32,
+    /// The hdov version that wrote it.
     pub created_by: String,
+    /// Objects (instances) in the scene.
     pub objects: u64,
     /// Full-detail faces of every instance.
     pub triangles: u64,
     /// Full-detail faces of the base meshes (instances stored once).
     pub stored_triangles: u64,
+    /// Distinct base meshes (each stored once).
     pub base_meshes: u64,
+    /// Nodes of the R-tree.
     pub nodes: u64,
+    /// Viewing cells of the grid (0 without one).
     pub cells: u64,
     /// Faces over all stored LOD levels (leaf and internal).
     pub lod_triangles: u64,
+    /// The viewing grid, if the database has one.
     pub grid: Option<GridInfo>,
     /// Cube-face resolution R of the DoV measurement.
     pub resolution: Option<u32>,
+    /// Shape and fill of the tree.
     pub tree: TreeStats,
+    /// How the database was built.
     pub build: BuildParams,
+    /// The database's files and their sizes.
     pub files: Vec<FileEntry>,
+    /// What the visibility stage measured and wrote (`None`: built without visibility).
     pub visibility: Option<VisibilityInfo>,
     /// Per layout name.
     pub layouts: BTreeMap<String, LayoutCosts>,

@@ -37,6 +37,7 @@ pub struct Database {
 }
 
 impl Database {
+    /// Opens the database directory `dir` read-only, through memory maps, validating every file.
     pub fn open(dir: &Path) -> Result<Database> {
         Self::open_with(dir, ReadMode::Mmap)
     }
@@ -122,6 +123,7 @@ impl Database {
         self.manifest.grid.as_ref()
     }
 
+    /// Nodes of the R-tree (node ids are `0..node_count()`, the root is 0).
     pub fn node_count(&self) -> u32 {
         self.manifest.counts.nodes as u32
     }

@@ -52,7 +52,9 @@ pub fn check_object_count(scene: &crate::scene::Scene) -> crate::error::Result<(
 /// possibly with [`BACK_FACE_BIT`] set, or [`NO_OBJECT`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct IdCube {
+    /// Texels per cube-face edge (R).
     pub resolution: u32,
+    /// 6·R² ids, face-major, then rows, then columns.
     pub ids: Vec<u32>,
 }
 
@@ -121,6 +123,7 @@ fn add_run(sums: &mut HashMap<u32, f64>, back_face: &mut f64, empty: &mut f64, i
 /// The DoV of every object seen from one point, as fractions of the sphere of directions.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointDov {
+    /// Texels per cube-face edge (R) of the measurement.
     pub resolution: u32,
     /// `(object index, DoV)`, sorted by object index, DoV > 0 only.
     pub objects: Vec<(u32, f64)>,

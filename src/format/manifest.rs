@@ -60,14 +60,23 @@ pub struct FileEntry {
 /// `manifest.json`. Its first key, `"hdov": "database"`, is the file's magic.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
+    /// The magic: always [`Manifest::MAGIC`].
     pub hdov: String,
+    /// The format version ([`super::FORMAT_VERSION`] when written).
     pub format_version: u32,
+    /// The hdov version that wrote it.
     pub created_by: String,
+    /// How the database was built.
     pub build: BuildParams,
+    /// What it holds.
     pub counts: Counts,
+    /// Shape and fill of the tree.
     pub tree: TreeStats,
+    /// The viewing grid, if any.
     pub grid: Option<ViewGrid>,
+    /// The database's files and their sizes as written.
     pub files: Vec<FileEntry>,
+    /// What the visibility stage measured and wrote (`None`: built without visibility).
     pub visibility: Option<VisibilityInfo>,
 }
 
@@ -86,6 +95,7 @@ pub fn is_database(dir: &Path) -> bool {
 }
 
 impl Manifest {
+    /// The value of the `hdov` key that marks a database manifest.
     pub const MAGIC: &'static str = "database";
 
     /// Reads and validates `DIR/manifest.json` (see [`Manifest::check`]).

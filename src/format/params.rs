@@ -48,7 +48,9 @@ pub enum BackendKind {
     /// The GPU backend on a hardware adapter, else the CPU backend.
     #[default]
     Auto,
+    /// The wgpu backend (fails without an adapter).
     Gpu,
+    /// The CPU ray caster (obvhs), everywhere.
     Cpu,
 }
 
@@ -71,7 +73,9 @@ impl std::str::FromStr for BackendKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(into = "String", try_from = "String")]
 pub struct AdaptiveSampling {
+    /// Spread points per cell measured first.
     pub seeds: u32,
+    /// Most interior points per cell in all.
     pub budget: u32,
 }
 
@@ -139,7 +143,9 @@ impl TryFrom<String> for AdaptiveSampling {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(into = "String", try_from = "String")]
 pub struct RayProbing {
+    /// Probe points per cell.
     pub points: u32,
+    /// Rays from each probe point towards each unseen candidate.
     pub rays: u32,
 }
 
@@ -191,7 +197,9 @@ impl TryFrom<String> for RayProbing {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(into = "[u32; 2]", try_from = "[u32; 2]")]
 pub struct Shard {
+    /// This part, 0-based.
     pub index: u32,
+    /// Parts the grid is cut into.
     pub count: u32,
 }
 
@@ -291,6 +299,7 @@ impl std::str::FromStr for FloorTest {
     }
 }
 
+/// How leaf LOD chains are simplified.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LodParams {
     /// Target faces of a level / faces of the level before.
@@ -323,7 +332,9 @@ pub struct BuildParams {
     /// threshold can stop early; a larger one reads fewer pages (docs/query.md, fan-out table).
     #[serde(default)]
     pub fanout: Option<u32>,
+    /// Which algorithm builds the R-tree.
     pub tree: TreeAlgorithm,
+    /// How leaf LOD chains are simplified.
     pub lod: LodParams,
     /// `None` builds tree and LODs only.
     pub visibility: Option<VisibilityParams>,
@@ -346,6 +357,7 @@ impl Default for BuildParams {
 pub struct VisibilityParams {
     /// Texels per cube-face edge (R).
     pub resolution: u32,
+    /// Which backend measures the DoV.
     pub backend: BackendKind,
     /// Stratified interior sample points per cell, besides the 8 shared corners.
     pub interior_samples: u32,

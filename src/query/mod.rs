@@ -56,8 +56,10 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// Every mode.
     pub const ALL: [Mode; 5] = [Mode::Threshold, Mode::Naive, Mode::Budget, Mode::Vmsse, Mode::Frustum];
 
+    /// The mode's name, as `--mode` takes it.
     pub fn name(self) -> &'static str {
         match self {
             Mode::Threshold => "threshold",
@@ -96,7 +98,10 @@ pub enum LodRule {
     /// The coarsest level whose simplification error, seen from the nearest point of the
     /// query's cell, is at most `pixels` pixels of the camera's image (of [`Camera::default`]
     /// without one). The answer then holds for every viewpoint of the cell.
-    ScreenError { pixels: f64 },
+    ScreenError {
+        /// Most pixels of screen error.
+        pixels: f64,
+    },
 }
 
 impl Default for LodRule {
@@ -133,6 +138,7 @@ impl FromStr for LodRule {
 /// What a query asks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueryParams {
+    /// How the query chooses what to return.
     pub mode: Mode,
     /// The DoV threshold η of threshold mode, in [0, 1]; 0 returns the naive answer.
     pub eta: f64,
@@ -168,13 +174,16 @@ impl Default for QueryParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ItemKind {
+    /// An object of the scene at one of its leaf LODs.
     Object,
+    /// A tree node drawn as one of its internal LODs.
     Node,
 }
 
 /// One thing to draw.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Item {
+    /// Object or node.
     pub kind: ItemKind,
     /// Object index or node id.
     pub id: u32,
@@ -182,6 +191,7 @@ pub struct Item {
     pub name: std::sync::Arc<str>,
     /// LOD level, 0 = finest.
     pub lod: u32,
+    /// Faces at the chosen level.
     pub faces: u32,
     /// DoV from the query's cell (0 in frustum mode, which measures none).
     pub dov: f32,
@@ -212,6 +222,7 @@ pub struct QueryStats {
     /// Page requests, and those served without a read (the reader's buffer or a session's
     /// cache held the page): `pages_read = pages_requested − page_hits`.
     pub pages_requested: u64,
+    /// Requests served without a read.
     pub page_hits: u64,
     /// Tree nodes whose page the query read.
     pub nodes_visited: u64,
@@ -221,6 +232,7 @@ pub struct QueryStats {
     pub geometry_bytes: u64,
     /// Budget mode: the budget could not be kept (the coarsest LOD alone exceeds it).
     pub over_budget: bool,
+    /// Time the query took, in microseconds.
     pub micros: u64,
 }
 
@@ -247,14 +259,21 @@ impl QueryStats {
 /// What a query returned.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Answer {
+    /// The viewpoint.
     pub at: [f32; 3],
     /// The cell `[i, j, k]` holding the viewpoint, and its id.
     pub cell: [u32; 3],
+    /// The id of the cell.
     pub cell_id: u32,
+    /// The mode that answered.
     pub mode: Mode,
+    /// The DoV threshold η asked with.
     pub eta: f64,
+    /// The V-page layout read (`review`: REVIEW read the tree alone).
     pub layout: String,
+    /// What to draw.
     pub items: Vec<Item>,
+    /// What finding it cost.
     pub stats: QueryStats,
     /// E.g. an η below the database's resolution floor.
     pub warnings: Vec<String>,

@@ -36,6 +36,7 @@ pub struct SessionParams {
     pub cache: PolicyKind,
     /// Cache capacity in pages and in bytes (`None`: unbounded).
     pub cache_pages: Option<usize>,
+    /// Cache capacity in bytes (`None`: unbounded).
     pub cache_bytes: Option<u64>,
     /// Most bytes of LOD geometry kept resident (`None`: unbounded).
     pub resident_bytes: Option<u64>,
@@ -59,43 +60,54 @@ impl Default for SessionParams {
 /// What one step of a walk did and cost.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Step {
+    /// The step's index along the walk.
     pub step: u64,
+    /// The viewpoint.
     pub at: [f32; 3],
+    /// The viewing cell `[i, j, k]` holding it (REVIEW: `[0, 0, 0]` outside the grid).
     pub cell: [u32; 3],
     /// The viewpoint entered another cell, and the tree was asked again.
     pub flipped: bool,
     /// LOD records loaded, and their bytes (heavy-weight I/O).
     pub loaded: u64,
+    /// Bytes of the records loaded.
     pub loaded_bytes: u64,
     /// LOD records evicted, and their bytes.
     pub evicted: u64,
+    /// Bytes of the records evicted.
     pub evicted_bytes: u64,
     /// Geometry resident after the step.
     pub resident: u64,
+    /// Bytes of the geometry resident after the step.
     pub resident_bytes: u64,
     /// Light-weight pages read (tree, V-index, V-pages) by this step's query.
     pub pages_read: u64,
     /// Page requests served without a read (the cache, or the reader's buffer of the page
     /// just read), and those read from the file.
     pub hits: u64,
+    /// Page requests read from the file.
     pub misses: u64,
     /// Of those, the requests that reached the page cache (past the read buffers), and those
     /// it served: the cache's own hit rate is `cache_hits / cache_requests`.
     pub cache_requests: u64,
+    /// Of those, the requests the cache served.
     pub cache_hits: u64,
     /// Pages prefetch read for the cell ahead.
     pub prefetch_pages: u64,
     /// Items and faces drawn this step (culled to the step's view when it has a look).
     pub items: u64,
+    /// Faces drawn this step.
     pub faces: u64,
     /// The cell's answer needs more geometry than the resident budget holds.
     pub over_budget: bool,
+    /// Time the step took, in microseconds.
     pub micros: u64,
     /// With `hdov walk --fidelity`: PSNR in dB of the drawn answer against full detail from
     /// the step's camera (`null` in JSON when the images are equal), and the share of pixels
     /// whose coverage differs (`render::fidelity`; a session measures none itself).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub psnr: Option<f64>,
+    /// With `hdov walk --fidelity`: the share of pixels whose coverage differs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coverage_diff: Option<f64>,
 }

@@ -43,11 +43,15 @@ pub const AMBIENT: f32 = 0.35;
 /// size.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct View {
+    /// Where the camera is.
     pub eye: Vec3,
     /// View direction (need not be unit length; not zero).
     pub look: Vec3,
+    /// Vertical field of view in degrees.
     pub fov_y_deg: f32,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// Near plane distance (there is no far plane).
     pub near: f32,
@@ -138,8 +142,10 @@ pub enum ColorMode {
 }
 
 impl ColorMode {
+    /// Every colour mode.
     pub const ALL: [ColorMode; 3] = [ColorMode::Shaded, ColorMode::Dov, ColorMode::Lod];
 
+    /// The mode's name, as `--color` takes it.
     pub fn name(self) -> &'static str {
         match self {
             ColorMode::Shaded => "shaded",
@@ -209,15 +215,20 @@ pub fn dov_ramp(dov: f32) -> [u8; 3] {
 /// One thing to draw: a mesh under a transform, in a base colour.
 #[derive(Clone, Copy, Debug)]
 pub struct Drawable<'a> {
+    /// The mesh to draw.
     pub mesh: &'a Mesh,
+    /// Its model-to-world transform.
     pub transform: Mat4,
+    /// Its base colour.
     pub color: [u8; 3],
 }
 
 /// What a view drew, read back: row-major, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
     /// RGBA8, 4 bytes per pixel (alpha 255).
     pub rgba: Vec<u8>,
@@ -243,6 +254,7 @@ impl Image {
         self.ids[self.index(x, y)]
     }
 
+    /// The RGB of pixel (`x`, `y`).
     pub fn rgb(&self, x: u32, y: u32) -> [u8; 3] {
         let i = self.index(x, y) * 4;
         [self.rgba[i], self.rgba[i + 1], self.rgba[i + 2]]

@@ -81,6 +81,13 @@ fn replace_file(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<
     result
 }
 
+impl Scene {
+    /// Writes the scene as a manifest at `path` and its geometry sidecar: see [`write`].
+    pub fn write_manifest(&self, path: &Path, replace: bool) -> Result<()> {
+        write(self, path, replace)
+    }
+}
+
 /// Writes `path` (the JSON manifest) and its geometry sidecar (same stem, `.meshes`). Existing
 /// files are refused unless `replace` and they are a scene manifest and mesh file of hdov's;
 /// each is replaced whole (written beside it, synced, renamed).

@@ -16,16 +16,19 @@ use crate::grid::ViewGrid;
 /// An indexed triangle mesh in its own (model) space.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Mesh {
+    /// Vertex positions.
     pub positions: Vec<[f32; 3]>,
     /// Three indices per triangle, counter-clockwise seen from outside.
     pub indices: Vec<u32>,
 }
 
 impl Mesh {
+    /// Triangles of the mesh.
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
 
+    /// The box of its vertices.
     pub fn bounds(&self) -> Aabb {
         Aabb::from_points(self.positions.iter().map(|p| Vec3::from(*p)))
     }
@@ -39,6 +42,14 @@ impl Mesh {
                 Vec3::from(self.positions[t[2] as usize]),
             ]
         })
+    }
+
+    /// This mesh with every position mapped by `m` (winding unchanged).
+    pub fn transformed(&self, m: &glam::Mat4) -> Mesh {
+        Mesh {
+            positions: self.positions.iter().map(|p| m.transform_point3((*p).into()).to_array()).collect(),
+            indices: self.indices.clone(),
+        }
     }
 
     /// One mesh holding all `parts` (indices shifted).
@@ -109,13 +120,22 @@ pub struct Object {
 /// A static world: base meshes, their instances and, optionally, the viewing-cell grid it brings.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Scene {
+    /// Base meshes, each stored once.
     pub meshes: Vec<BaseMesh>,
+    /// Objects: instances of base meshes under transforms.
     pub objects: Vec<Object>,
     /// The default viewing-cell grid (the city generator writes one; OBJ files have none).
     pub grid: Option<ViewGrid>,
 }
 
 impl Scene {
+    /// The whole scene as one mesh: every object's mesh under its transform.
+    pub fn merged_mesh(&self) -> Mesh {
+        let parts: Vec<Mesh> =
+            self.objects.iter().enumerate().map(|(i, o)| self.object_mesh(i).transformed(&o.transform)).collect();
+        Mesh::merged(&parts)
+    }
+
     /// Loads an OBJ file or a scene manifest (`.json`), chosen by extension, and checks it.
     /// The second value holds warnings (e.g. skipped empty OBJ groups).
     pub fn load(path: &std::path::Path) -> Result<(Scene, Vec<String>)> {
@@ -129,6 +149,7 @@ impl Scene {
         Ok((scene, warnings))
     }
 
+    /// The base mesh of `object`.
     pub fn object_mesh(&self, object: usize) -> &Mesh {
         &self.meshes[self.objects[object].mesh as usize].mesh
     }
@@ -144,6 +165,7 @@ impl Scene {
         self.objects.iter().map(|o| mesh_boxes[o.mesh as usize].transformed(&o.transform)).collect()
     }
 
+    /// The box of every object under its transform.
     pub fn bounds(&self) -> Aabb {
         self.all_object_bounds().into_iter().fold(Aabb::EMPTY, Aabb::union)
     }

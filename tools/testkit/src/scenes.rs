@@ -224,7 +224,7 @@ pub fn town(n: usize, ball_subdivisions: u32) -> Scene {
                 mesh: scene.meshes.len() as u32,
                 transform: Mat4::IDENTITY,
             });
-            scene.meshes.push(BaseMesh { name, mesh: hdov::lod::transformed(&unit_cube(), &place) });
+            scene.meshes.push(BaseMesh { name, mesh: unit_cube().transformed(&place) });
             if (i + j) % 2 == 0 {
                 let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
                 scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
