@@ -24,10 +24,10 @@ pub enum Error {
     },
     /// A parameter that cannot be used, named as the library names it (`resolution`,
     /// `grid`, ...); a user interface maps the name to its own (the `hdov` command to a flag).
-    #[error("{param}: {reason}")]
+    #[error("{}: {reason}", param.name())]
     BadParam {
-        /// The parameter's name in the library.
-        param: String,
+        /// The parameter.
+        param: Param,
         /// Why it cannot be used.
         reason: String,
     },
@@ -43,6 +43,133 @@ pub enum Error {
 /// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// Every parameter the library can refuse, in one list, so that a user interface maps each to its
+/// own word for it and a compiler checks that the map is whole (the `hdov` command maps them to
+/// flags). [`Param::name`] is the library's name, which [`Error::BadParam`]'s message starts
+/// with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Param {
+    /// A viewpoint.
+    At,
+    /// The DoV backend.
+    Backend,
+    /// The city generator's block counts.
+    Blocks,
+    /// A query or session camera.
+    Camera,
+    /// The viewing cells' size.
+    CellSize,
+    /// How V-entries store DoV.
+    DovCodec,
+    /// The DoV threshold η.
+    Eta,
+    /// REVIEW's eyesight.
+    Eyesight,
+    /// Entries per tree node.
+    Fanout,
+    /// Fidelity against full detail (a session must have taken a step).
+    Fidelity,
+    /// REVIEW's field of view.
+    Fov,
+    /// The viewing grid.
+    Grid,
+    /// An id cube handed to a DoV backend.
+    IdCube,
+    /// Interior sample points per cell (and the samplers that add them).
+    InteriorSamples,
+    /// The V-page layout to read.
+    Layout,
+    /// The V-page layouts to write.
+    Layouts,
+    /// The GPU backend's LOD-aware drawing tolerance.
+    LodDrawTolerance,
+    /// The leaf LOD chain's face ratio.
+    LodRatio,
+    /// LOD chains handed to the GPU backend.
+    Lods,
+    /// A near-plane distance.
+    Near,
+    /// Bytes per page.
+    PageSize,
+    /// A walk's path of viewpoints.
+    Path,
+    /// A point handed to a DoV backend.
+    Point,
+    /// REVIEW's prefetch factor.
+    PrefetchK,
+    /// The viewing grid's region.
+    Region,
+    /// Drawing an image (needs a graphics adapter).
+    Render,
+    /// Texels per cube-face edge.
+    Resolution,
+    /// REVIEW's disk-cell scale.
+    ReviewBox,
+    /// Sample points handed to the per-cell combination.
+    Samples,
+    /// The city generator's scale.
+    Scale,
+    /// The scene.
+    Scene,
+    /// The part of the grid a build computes.
+    Shard,
+    /// The shard databases a merge joins.
+    Shards,
+    /// An image size.
+    Size,
+    /// The vmsse mode's pixel bound τ.
+    Tau,
+    /// The tree shape handed to the per-cell combination.
+    TreeShape,
+    /// The visible-zero-DoV floor tests.
+    ZeroDovFloor,
+}
+
+impl Param {
+    /// The library's name of the parameter (`resolution`, `page_size`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Param::At => "at",
+            Param::Backend => "backend",
+            Param::Blocks => "blocks",
+            Param::Camera => "camera",
+            Param::CellSize => "cell_size",
+            Param::DovCodec => "dov_codec",
+            Param::Eta => "eta",
+            Param::Eyesight => "eyesight",
+            Param::Fanout => "fanout",
+            Param::Fidelity => "fidelity",
+            Param::Fov => "fov",
+            Param::Grid => "grid",
+            Param::IdCube => "id cube",
+            Param::InteriorSamples => "interior_samples",
+            Param::Layout => "layout",
+            Param::Layouts => "layouts",
+            Param::LodDrawTolerance => "lod_draw_tolerance",
+            Param::LodRatio => "lod.ratio",
+            Param::Lods => "LODs",
+            Param::Near => "near",
+            Param::PageSize => "page_size",
+            Param::Path => "path",
+            Param::Point => "point",
+            Param::PrefetchK => "prefetch_k",
+            Param::Region => "region",
+            Param::Render => "render",
+            Param::Resolution => "resolution",
+            Param::ReviewBox => "review_box",
+            Param::Samples => "samples",
+            Param::Scale => "scale",
+            Param::Scene => "scene",
+            Param::Shard => "shard",
+            Param::Shards => "shards",
+            Param::Size => "size",
+            Param::Tau => "tau",
+            Param::TreeShape => "tree shape",
+            Param::ZeroDovFloor => "zero_dov_floor",
+        }
+    }
+}
+
 impl Error {
     /// An I/O failure on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
@@ -53,8 +180,8 @@ impl Error {
         Error::BadFile { path: path.into(), reason: reason.into() }
     }
     /// A parameter, named as the library names it, that cannot be used.
-    pub fn bad_param(param: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::BadParam { param: param.into(), reason: reason.into() }
+    pub fn bad_param(param: Param, reason: impl Into<String>) -> Self {
+        Error::BadParam { param, reason: reason.into() }
     }
 }
 

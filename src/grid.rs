@@ -38,7 +38,7 @@ impl ViewGrid {
         dims: Option<[u32; 3]>,
         cell_size: Option<f32>,
     ) -> crate::Result<ViewGrid> {
-        use crate::Error;
+        use crate::error::{Error, Param};
         let region = region.or(scene_grid.map(|g| g.region)).unwrap_or_else(|| {
             let y = bounds.min.y;
             Aabb::new(Vec3::new(bounds.min.x, y + 1.5, bounds.min.z), Vec3::new(bounds.max.x, y + 2.0, bounds.max.z))
@@ -52,11 +52,11 @@ impl ViewGrid {
                 let cells = n(e.x) * n(e.z);
                 if cells > Self::MAX_CELLS as f64 {
                     let reason = format!("{s} cuts the region into {cells:.0} cells, more than {}", Self::MAX_CELLS);
-                    return Err(Error::bad_param("cell_size", reason));
+                    return Err(Error::bad_param(Param::CellSize, reason));
                 }
                 [n(e.x) as u32, 1, n(e.z) as u32]
             }
-            (None, Some(s)) => return Err(Error::bad_param("cell_size", format!("{s} must be a positive length"))),
+            (None, Some(s)) => return Err(Error::bad_param(Param::CellSize, format!("{s} must be a positive length"))),
             (None, None) => match scene_grid {
                 Some(g) if g.region == region => g.dims,
                 _ => {
@@ -67,7 +67,7 @@ impl ViewGrid {
             },
         };
         let g = ViewGrid::new(region, dims);
-        g.check().map_err(|r| Error::bad_param(if dims_given { "grid" } else { "region" }, r))?;
+        g.check().map_err(|r| Error::bad_param(if dims_given { Param::Grid } else { Param::Region }, r))?;
         Ok(g)
     }
 

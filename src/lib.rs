@@ -67,7 +67,7 @@ pub use camera::Camera;
 pub use db::Database;
 pub use db::info::Info;
 pub use dov::{DovBackend, IdCube, PointDov, open_backend};
-pub use error::{Error, Result};
+pub use error::{Error, Param, Result};
 pub use format::Manifest;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, LodParams,

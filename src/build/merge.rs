@@ -13,7 +13,7 @@ use super::vpages::read_cells;
 use super::{VisibilityParams, begin_write, write_layouts, write_manifest};
 use crate::db::Database;
 use crate::dov::precompute::Shard;
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::{CATALOG_FILE, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
 use crate::grid::ViewGrid;
 
@@ -29,20 +29,19 @@ struct ShardDb {
 impl ShardDb {
     fn open(path: &Path) -> Result<ShardDb> {
         let db = Database::open(path)?;
-        let name = || path.display().to_string();
         let m = db.manifest();
         let (Some(params), Some(info), Some(grid)) = (m.build.visibility.clone(), m.visibility.clone(), m.grid) else {
-            return Err(Error::bad_param(name(), "holds no visibility"));
+            return Err(Error::bad_file(path, "holds no visibility"));
         };
-        let shard = params.shard.ok_or_else(|| Error::bad_param(name(), "is not a shard (built without a shard)"))?;
+        let shard = params.shard.ok_or_else(|| Error::bad_file(path, "is not a shard (built without a shard)"))?;
         if db.layouts().is_empty() {
-            return Err(Error::bad_param(name(), "holds no layout"));
+            return Err(Error::bad_file(path, "holds no layout"));
         }
         Ok(ShardDb { db, params, info, shard, grid })
     }
 
-    fn name(&self) -> String {
-        self.db.dir().display().to_string()
+    fn path(&self) -> &Path {
+        self.db.dir()
     }
 }
 
@@ -51,7 +50,7 @@ impl ShardDb {
 /// the set is refused in one line unless the shards share one build (parameters, grid and
 /// byte-identical tree, geometry and catalog) and cover every part exactly once.
 pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> {
-    let first_path = shards.first().ok_or_else(|| Error::bad_param("shards", "no shard databases given"))?;
+    let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shard databases given"))?;
     let dbs = shards.iter().map(|p| ShardDb::open(p)).collect::<Result<Vec<_>>>()?;
     let first = &dbs[0];
     let count = first.shard.count;
@@ -77,24 +76,24 @@ pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> 
     };
     for s in &dbs {
         if s.shard.count != count || !same_build(s) {
-            return Err(Error::bad_param(
-                s.name(),
+            return Err(Error::bad_file(
+                s.path(),
                 format!("was built with other parameters than {}", first_path.display()),
             ));
         }
         if checksums(&s.db)? != reference {
-            return Err(Error::bad_param(
-                s.name(),
+            return Err(Error::bad_file(
+                s.path(),
                 format!("holds another scene or tree than {}", first_path.display()),
             ));
         }
         // `index < count` holds for every shard read (checked on open), and count is shared.
         if let Some(other) = seen[s.shard.index as usize].replace(s.db.dir()) {
-            return Err(Error::bad_param(s.name(), format!("is shard {}, as is {}", s.shard, other.display())));
+            return Err(Error::bad_file(s.path(), format!("is shard {}, as is {}", s.shard, other.display())));
         }
     }
     if let Some(missing) = seen.iter().position(Option::is_none) {
-        return Err(Error::bad_param("shards", format!("shard {missing}/{count} is missing")));
+        return Err(Error::bad_param(Param::Shards, format!("shard {missing}/{count} is missing")));
     }
 
     let txn = begin_write(out, replace)?;

@@ -17,7 +17,7 @@ use serde::Serialize;
 use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
 use crate::dov::{BackendKind, WithRays, open_backend};
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
 pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
 use crate::format::tree_page::{self, NodePage};
@@ -71,7 +71,7 @@ pub fn build(
     replace: bool,
     progress: &Progress,
 ) -> Result<BuildReport> {
-    scene.check().map_err(|r| Error::bad_param("scene", r))?;
+    scene.check().map_err(|r| Error::bad_param(Param::Scene, r))?;
     params.check(scene.grid.as_ref())?;
     let fanout = params.max_entries();
     // Claim the target first: a refusal must come before minutes of work, not after.

@@ -45,7 +45,7 @@ use rayon::prelude::*;
 pub use building::{BuildingKind, MAX_TRIANGLES as MAX_BUILDING_TRIANGLES, MIN_TRIANGLES as MIN_BUILDING_TRIANGLES};
 pub use detail::{DETAIL_HEIGHT, DETAIL_MAX_WIDTH, normalise_detail, procedural_detail};
 
-use crate::error::Error;
+use crate::error::{Error, Param};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 use crate::scene::{BaseMesh, Mesh, Object, Scene};
@@ -123,7 +123,7 @@ impl FromStr for CityScale {
 
     fn from_str(s: &str) -> Result<Self, Error> {
         CityScale::ALL.into_iter().find(|scale| scale.name().eq_ignore_ascii_case(s)).ok_or_else(|| {
-            Error::bad_param("scale", format!("unknown scale '{s}': expected tiny, small, default or large"))
+            Error::bad_param(Param::Scale, format!("unknown scale '{s}': expected tiny, small, default or large"))
         })
     }
 }
@@ -187,9 +187,10 @@ impl CityParams {
     /// Checks the block counts against [`MAX_BLOCKS`]; costs nothing.
     pub fn check(&self) -> Result<(), Error> {
         match self.blocks {
-            Some(b) if b.iter().any(|&n| n > MAX_BLOCKS) => {
-                Err(Error::bad_param("blocks", format!("{}x{} is more than {MAX_BLOCKS} along an axis", b[0], b[1])))
-            }
+            Some(b) if b.iter().any(|&n| n > MAX_BLOCKS) => Err(Error::bad_param(
+                Param::Blocks,
+                format!("{}x{} is more than {MAX_BLOCKS} along an axis", b[0], b[1]),
+            )),
             _ => Ok(()),
         }
     }

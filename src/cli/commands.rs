@@ -9,7 +9,7 @@ use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
 use hdov::{
     Aabb, AdaptiveSampling, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info,
-    LayoutKind, Manifest, Progress, RayProbing, Result, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
+    LayoutKind, Manifest, Param, Progress, RayProbing, Result, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
 };
 
 #[derive(Args)]
@@ -156,7 +156,7 @@ impl VisibilityArgs {
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
             zero_dov_floor: floor
-                .map(|t| t.parse::<FloorTest>().map_err(|r| Error::bad_param("zero_dov_floor", r)))
+                .map(|t| t.parse::<FloorTest>().map_err(|r| Error::bad_param(Param::ZeroDovFloor, r)))
                 .collect::<Result<_>>()?,
         }))
     }
@@ -369,7 +369,8 @@ fn print_info(path: &Path, info: &Info, m: &Manifest) {
         println!("  {:<16} {:>12} bytes", f.name, f.bytes);
     }
     print_visibility(m);
-    for (name, l) in &info.layouts {
+    for (kind, l) in &info.layouts {
+        let name = kind.name();
         println!(
             "    {name:<17} visible nodes per cell {:.1} (max {}), cell flip reads {:.1} pages (max {})",
             l.visible_nodes_per_cell.mean, l.visible_nodes_per_cell.max, l.flip_pages.mean, l.flip_pages.max

@@ -10,7 +10,7 @@ mod render;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use hdov::Error;
+use hdov::{Error, Param};
 
 #[derive(Parser)]
 #[command(name = "hdov", version, about = "A disk-resident visibility database for large 3D scenes (HDoV-tree)")]
@@ -96,41 +96,53 @@ fn clap_one_line(e: &clap::Error) -> String {
 fn user_message(e: &Error) -> String {
     use hdov::StorageError as S;
     match e {
-        Error::BadParam { param, reason } => format!("{}: {reason}", flag_of(param)),
+        Error::BadParam { param, reason } => format!("{}: {reason}", flag_of(*param)),
         Error::Storage(S::Exists { .. }) => format!("{e}; pass --force to replace it"),
         _ => e.to_string(),
     }
 }
 
-/// The flag that sets a library parameter (the name itself when no flag does, e.g. a file).
-fn flag_of(param: &str) -> &str {
+/// The flag (or argument) that sets a library parameter: every parameter has one, and the
+/// compiler checks that none is left out.
+fn flag_of(param: Param) -> &'static str {
     match param {
-        "page_size" => "--page-size",
-        "fanout" => "--fanout",
-        "resolution" => "--resolution",
-        "interior_samples" => "--samples",
-        "layouts" => "--layouts",
-        "layout" => "--layout",
-        "dov_codec" => "--dov-codec",
-        "shard" => "--shard",
-        "zero_dov_floor" => "--zero-dov-floor",
-        "lod_draw_tolerance" => "--lod-draw-tolerance",
-        "backend" => "--backend",
-        "grid" => "--grid",
-        "region" => "--region",
-        "cell_size" => "--cell-size",
-        "blocks" => "--blocks",
-        "scale" => "--scale",
-        "shards" => "SHARD_DB",
-        "at" => "--at",
-        "eta" => "--eta",
-        "tau" => "--tau",
-        "camera" => "--look",
-        "size" => "--size",
-        "review_box" => "--review-box",
-        "eyesight" => "--eyesight",
-        "fov" => "--fov",
-        "scene" => "SCENE",
-        other => other,
+        Param::At => "--at",
+        Param::Backend => "--backend",
+        Param::Blocks => "--blocks",
+        Param::Camera => "--look",
+        Param::CellSize => "--cell-size",
+        Param::DovCodec => "--dov-codec",
+        Param::Eta => "--eta",
+        Param::Eyesight => "--eyesight",
+        Param::Fanout => "--fanout",
+        Param::Fidelity => "--fidelity",
+        Param::Fov => "--fov",
+        Param::Grid => "--grid",
+        Param::InteriorSamples => "--samples",
+        Param::Layout => "--layout",
+        Param::Layouts => "--layouts",
+        Param::LodDrawTolerance => "--lod-draw-tolerance",
+        Param::PageSize => "--page-size",
+        Param::Path => "--path",
+        Param::Region => "--region",
+        Param::Render => "render",
+        Param::Resolution => "--resolution",
+        Param::ReviewBox => "--review-box",
+        Param::Scale => "--scale",
+        Param::Scene => "SCENE",
+        Param::Shard => "--shard",
+        Param::Shards => "SHARD_DB",
+        Param::Size => "--size",
+        Param::Tau => "--tau",
+        Param::ZeroDovFloor => "--zero-dov-floor",
+        // Set by no flag: the library's own inputs, named as the library names them.
+        Param::IdCube
+        | Param::LodRatio
+        | Param::Lods
+        | Param::Near
+        | Param::Point
+        | Param::PrefetchK
+        | Param::Samples
+        | Param::TreeShape => param.name(),
     }
 }

@@ -11,7 +11,7 @@ use hdov::city::WalkKind;
 use hdov::render::{View, fidelity};
 use hdov::review::{self, ReviewParams};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
-use hdov::{Camera, Error, LodRule, Mode, Result};
+use hdov::{Camera, Error, LodRule, Mode, Param, Result};
 use hdov::{LayoutKind, PolicyKind};
 
 /// What a query returns: its mode, η, level rule and the modes' own bounds (`query`, `walk` and
@@ -117,7 +117,7 @@ fn print_answer(a: &Answer, list: usize) {
         a.cell_id,
         a.mode,
         a.eta,
-        a.layout,
+        a.layout.map_or_else(|| "no".to_string(), |k| k.to_string()),
         a.items.len(),
         nodes,
         s.faces
@@ -245,7 +245,7 @@ pub fn walk(a: WalkCmd) -> Result<()> {
             let walk = hdov::city::walk(grid, kind, a.steps as usize);
             (walk.into_iter().enumerate().map(|(i, (at, look))| (i, at, Some(look))).collect(), a.db.clone())
         }
-        (None, None) => return Err(Error::bad_param("path", "give --path FILE or --walk KIND")),
+        (None, None) => return Err(Error::bad_param(Param::Path, "give --path FILE or --walk KIND")),
     };
     let review = match a.method {
         WalkMethod::Visual => None,
@@ -272,9 +272,7 @@ pub fn walk(a: WalkCmd) -> Result<()> {
     let mut steps: Vec<Step> = Vec::with_capacity(path.len());
     for (line, at, look) in path {
         let mut step = session.step(at, look).map_err(|e| match e {
-            Error::BadParam { param, reason } if param == "at" => {
-                Error::bad_file(&source, format!("line {line}: {reason}"))
-            }
+            Error::BadParam { param: Param::At, reason } => Error::bad_file(&source, format!("line {line}: {reason}")),
             e => e,
         })?;
         if let (Some(renderer), Some(look)) = (&renderer, look.or(a.query.look)) {

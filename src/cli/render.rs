@@ -11,7 +11,7 @@ use super::args::{parse_dims, parse_vec3};
 use hdov::Database;
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
-use hdov::{Error, Result};
+use hdov::{Error, Param, Result};
 
 #[derive(Args)]
 pub struct RenderCmd {
@@ -64,7 +64,7 @@ struct Report {
 pub(super) fn open_renderer() -> Result<Renderer> {
     Renderer::new().map_err(|e| match e {
         Error::Gpu(reason) if reason.starts_with("no adapter") => {
-            Error::bad_param("render", "no graphics adapter (install mesa-vulkan-drivers)")
+            Error::bad_param(Param::Render, "no graphics adapter (install mesa-vulkan-drivers)")
         }
         e => e,
     })

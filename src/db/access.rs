@@ -3,7 +3,7 @@
 //! cache), and counted per file.
 
 use super::Database;
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::tree_page::NodePage;
 use hdov_storage::{CacheLimits, FileIo, LayoutCursor, LayoutKind, PageReader, PolicyKind, VEntry};
 
@@ -50,7 +50,7 @@ impl<'db> Access<'db> {
             Some(k) => k,
             None if layouts.contains(&LayoutKind::IndexedVertical) => LayoutKind::IndexedVertical,
             None => *layouts.first().ok_or_else(|| {
-                Error::bad_param("layout", format!("{} holds no visibility to query", db.dir().display()))
+                Error::bad_param(Param::Layout, format!("{} holds no visibility to query", db.dir().display()))
             })?,
         };
         Ok(Access { db, cursor: Some(db.layout(kind)?.cursor()), pages })
@@ -67,9 +67,9 @@ impl<'db> Access<'db> {
         self.db
     }
 
-    /// The layout read ("none" for a spatial reader).
-    pub fn layout_name(&self) -> String {
-        self.cursor.as_ref().map_or_else(|| "none".to_string(), |c| c.layout().kind().to_string())
+    /// The layout read (`None` for a spatial reader).
+    pub fn layout_kind(&self) -> Option<LayoutKind> {
+        self.cursor.as_ref().map(|c| c.layout().kind())
     }
 
     /// Selects the cell whose V-pages the next reads return (free if it is selected already).
@@ -77,7 +77,7 @@ impl<'db> Access<'db> {
         let pages = &mut self.pages;
         self.cursor
             .as_mut()
-            .ok_or_else(|| Error::bad_param("layout", "a spatial reader reads no V-pages"))?
+            .ok_or_else(|| Error::bad_param(Param::Layout, "a spatial reader reads no V-pages"))?
             .flip_to_cell(cell, pages)?;
         Ok(())
     }
@@ -97,7 +97,7 @@ impl<'db> Access<'db> {
     pub fn vpage(&mut self, node: u32, priority: f64, out: &mut Vec<VEntry>) -> Result<bool> {
         let pages = &mut self.pages;
         let cursor =
-            self.cursor.as_mut().ok_or_else(|| Error::bad_param("layout", "a spatial reader reads no V-pages"))?;
+            self.cursor.as_mut().ok_or_else(|| Error::bad_param(Param::Layout, "a spatial reader reads no V-pages"))?;
         Ok(cursor.vpage_into(node, priority, pages, out)?)
     }
 

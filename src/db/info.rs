@@ -10,6 +10,7 @@ use crate::error::Result;
 use crate::format::params::BuildParams;
 use crate::format::{FileEntry, VisibilityInfo};
 use crate::rtree::TreeStats;
+use hdov_storage::{DovCodec, LayoutKind};
 
 /// A database described: counts, grid, build parameters, files and every layout's costs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -44,8 +45,9 @@ pub struct Info {
     pub files: Vec<FileEntry>,
     /// What the visibility stage measured and wrote (`None`: built without visibility).
     pub visibility: Option<VisibilityInfo>,
-    /// Per layout name.
-    pub layouts: BTreeMap<String, LayoutCosts>,
+    /// Per layout (keyed by its name in JSON).
+    #[serde(with = "crate::format::by_name::keys")]
+    pub layouts: BTreeMap<LayoutKind, LayoutCosts>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -63,7 +65,8 @@ pub struct LayoutCosts {
     pub bytes: u64,
     pub vpage_bytes: u64,
     pub index_bytes: u64,
-    pub dov_codec: String,
+    #[serde(with = "crate::format::by_name::one")]
+    pub dov_codec: DovCodec,
     pub visible_nodes_per_cell: MeanMax,
     /// Storage per visible (node, cell) pair: what the layout pays for visibility.
     pub bytes_per_visible_vpage: f64,
@@ -88,12 +91,12 @@ impl Database {
             let written = m.visibility.iter().flat_map(|v| &v.layouts).find(|l| l.name == kind.name());
             let visible_pages = (s.visible_nodes_mean * f64::from(s.cell_count)).max(1.0);
             layouts.insert(
-                kind.name().to_string(),
+                kind,
                 LayoutCosts {
                     bytes: s.bytes,
                     vpage_bytes: written.map_or(0, |l| l.vpage_bytes),
                     index_bytes: written.map_or(0, |l| l.index_bytes),
-                    dov_codec: s.dov.to_string(),
+                    dov_codec: s.dov,
                     visible_nodes_per_cell: MeanMax { mean: s.visible_nodes_mean, max: s.visible_nodes_max },
                     bytes_per_visible_vpage: s.bytes as f64 / visible_pages,
                     flip_pages: MeanMax { mean: s.flip_pages_mean, max: s.flip_pages_max },

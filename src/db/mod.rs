@@ -8,7 +8,7 @@ pub mod info;
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::catalog::{Catalog, LodRef};
 use crate::format::tree_page::{self, NodePage};
 use crate::format::{
@@ -162,7 +162,7 @@ impl Database {
         self.layouts
             .iter()
             .find(|l| l.kind() == kind)
-            .ok_or_else(|| Error::bad_param("layout", format!("{} holds no {kind} layout", self.dir.display())))
+            .ok_or_else(|| Error::bad_param(Param::Layout, format!("{} holds no {kind} layout", self.dir.display())))
     }
 
     /// The encoded bytes of one LOD level in `geometry.blob` (checksum verified): what a

@@ -35,7 +35,7 @@ use wgpu::util::DrawIndexedIndirectArgs;
 use super::cpu::{check_cube, check_point, check_resolution_and_near};
 use super::cubemap::{FACE_COUNT, face_basis};
 use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube};
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::geom::{Aabb, max_scale};
 use crate::gfx::Gpu;
 use crate::lod::{LodLevel, coarsest_below};
@@ -191,13 +191,13 @@ impl GpuBackend {
         check_resolution_and_near(resolution, near)?;
         let tolerance = options.lod_tolerance_texels;
         if !(tolerance.is_finite() && tolerance >= 0.0) {
-            return Err(Error::bad_param("LOD tolerance", format!("{tolerance} must be finite and >= 0")));
+            return Err(Error::bad_param(Param::LodDrawTolerance, format!("{tolerance} must be finite and >= 0")));
         }
         if let Some(lods) = options.lods
             && lods.len() != scene.meshes.len()
         {
             return Err(Error::bad_param(
-                "LODs",
+                Param::Lods,
                 format!("{} chains for {} base meshes", lods.len(), scene.meshes.len()),
             ));
         }

@@ -25,7 +25,7 @@ pub use cpu::CpuBackend;
 pub use cubemap::CubeMap;
 pub use gpu::GpuBackend;
 
-use crate::error::Result;
+use crate::error::{Param, Result};
 pub use crate::format::params::BackendKind;
 
 /// Id of a texel that sees no object.
@@ -40,7 +40,7 @@ pub const MAX_OBJECT_ID: u32 = BACK_FACE_BIT - 2;
 pub fn check_object_count(scene: &crate::scene::Scene) -> crate::error::Result<()> {
     if scene.objects.len() > MAX_OBJECT_ID as usize {
         return Err(crate::error::Error::bad_param(
-            "scene",
+            Param::Scene,
             format!("{} objects exceed the DoV id limit {MAX_OBJECT_ID}", scene.objects.len()),
         ));
     }
@@ -253,7 +253,7 @@ pub fn open_backend(
 ) -> Result<Box<dyn DovBackend>> {
     if !(1..=4096).contains(&resolution) {
         return Err(crate::Error::bad_param(
-            "resolution",
+            Param::Resolution,
             format!("{resolution} is outside 1..=4096 texels per face edge"),
         ));
     }

@@ -22,7 +22,7 @@ use super::adaptive::{AdaptiveSampling, sample_cell};
 use super::probe::{RayProbing, probe_cell};
 use super::sampling::{interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
@@ -42,12 +42,12 @@ impl TreeShape {
         let nodes = self.node_parent.len();
         if self.object_leaf.len() != objects {
             return Err(Error::bad_param(
-                "tree shape",
+                Param::TreeShape,
                 format!("{} object leaves for {objects} objects", self.object_leaf.len()),
             ));
         }
         if let Some(&bad) = self.object_leaf.iter().find(|&&l| l as usize >= nodes) {
-            return Err(Error::bad_param("tree shape", format!("leaf {bad} out of range ({nodes} nodes)")));
+            return Err(Error::bad_param(Param::TreeShape, format!("leaf {bad} out of range ({nodes} nodes)")));
         }
         for start in 0..nodes {
             let mut node = start;
@@ -57,7 +57,7 @@ impl TreeShape {
                     Some(p) if (p as usize) < nodes && step < nodes => node = p as usize,
                     Some(p) => {
                         return Err(Error::bad_param(
-                            "tree shape",
+                            Param::TreeShape,
                             format!("node {start}: parent {p} out of range or a cycle"),
                         ));
                     }
@@ -206,10 +206,10 @@ pub fn precompute_shard(
     shard: Shard,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ShardDov> {
-    grid.check().map_err(|r| Error::bad_param("grid", r))?;
+    grid.check().map_err(|r| Error::bad_param(Param::Grid, r))?;
     shape.check(object_bounds.len())?;
     if shard.count == 0 || shard.index >= shard.count {
-        return Err(Error::bad_param("shard", format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
+        return Err(Error::bad_param(Param::Shard, format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
     let cells = shard.cells(grid);
     // The adaptive sampler and the probes take their candidates from the neighbours' corners too;
@@ -223,7 +223,7 @@ pub fn precompute_shard(
         && backend.ray_caster().is_none()
     {
         return Err(Error::bad_param(
-            "samples",
+            Param::Samples,
             format!("{p} casts single rays: the {} backend has none (use the cpu backend)", backend.name()),
         ));
     }

@@ -11,6 +11,7 @@
 //! ```
 //! `docs/format.md` gives every byte.
 
+pub(crate) mod by_name;
 pub mod catalog;
 pub mod manifest;
 pub mod params;

@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::grid::ViewGrid;
 use crate::rtree::TreeAlgorithm;
 use hdov_storage::{DovCodec, LayoutKind};
@@ -62,7 +62,7 @@ impl std::str::FromStr for BackendKind {
             "auto" => Ok(BackendKind::Auto),
             "gpu" => Ok(BackendKind::Gpu),
             "cpu" => Ok(BackendKind::Cpu),
-            _ => Err(Error::bad_param("backend", format!("'{s}': expected auto, gpu or cpu"))),
+            _ => Err(Error::bad_param(Param::Backend, format!("'{s}': expected auto, gpu or cpu"))),
         }
     }
 }
@@ -370,16 +370,16 @@ pub struct VisibilityParams {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe: Option<RayProbing>,
     /// Layouts to write.
-    #[serde(with = "names")]
+    #[serde(with = "super::by_name::list")]
     pub layouts: Vec<LayoutKind>,
     /// How V-entries store DoV.
-    #[serde(with = "name")]
+    #[serde(with = "super::by_name::one")]
     pub dov_codec: DovCodec,
     /// This database holds part I of N of the grid's cells (`[I, N]` in the manifest).
     pub shard: Option<Shard>,
     /// Visible-zero-DoV tests (thesis §5.5.2) that give unseen objects the one-texel floor.
     /// Empty: no floor.
-    #[serde(default, with = "names")]
+    #[serde(default, with = "super::by_name::list")]
     pub zero_dov_floor: Vec<FloorTest>,
     /// GPU backend: texels of LOD error below which an object is drawn coarser (0 = off).
     #[serde(default)]
@@ -424,7 +424,7 @@ impl BuildParams {
         let fanout = crate::format::tree_page::fanout(self.page_size);
         if !(MIN_PAGE_SIZE..=MAX_PAGE_SIZE).contains(&self.page_size) || fanout < 2 {
             return Err(Error::bad_param(
-                "page_size",
+                Param::PageSize,
                 format!("{} bytes is outside {MIN_PAGE_SIZE}..={MAX_PAGE_SIZE}", self.page_size),
             ));
         }
@@ -432,55 +432,55 @@ impl BuildParams {
             && !(2..=fanout as u32).contains(&m)
         {
             return Err(Error::bad_param(
-                "fanout",
+                Param::Fanout,
                 format!("{m} entries is outside 2..={fanout}, what a {}-byte page holds", self.page_size),
             ));
         }
         let lod = &self.lod;
         if !(lod.ratio > 0.0 && lod.ratio < 1.0) {
-            return Err(Error::bad_param("lod.ratio", format!("{} is not in (0, 1)", lod.ratio)));
+            return Err(Error::bad_param(Param::LodRatio, format!("{} is not in (0, 1)", lod.ratio)));
         }
         let Some(v) = &self.visibility else { return Ok(()) };
         if !(1..=MAX_RESOLUTION).contains(&v.resolution) {
-            return Err(Error::bad_param("resolution", format!("{} is outside 1..={MAX_RESOLUTION}", v.resolution)));
+            return Err(Error::bad_param(Param::Resolution, format!("{} is outside 1..={MAX_RESOLUTION}", v.resolution)));
         }
         if v.interior_samples > MAX_INTERIOR_SAMPLES {
             return Err(Error::bad_param(
-                "interior_samples",
+                Param::InteriorSamples,
                 format!("{} is above {MAX_INTERIOR_SAMPLES} per cell", v.interior_samples),
             ));
         }
         if let Some(a) = v.adaptive {
-            AdaptiveSampling::new(a.seeds, a.budget).map_err(|r| Error::bad_param("interior_samples", r))?;
+            AdaptiveSampling::new(a.seeds, a.budget).map_err(|r| Error::bad_param(Param::InteriorSamples, r))?;
             if a.budget > MAX_INTERIOR_SAMPLES {
                 return Err(Error::bad_param(
-                    "interior_samples",
+                    Param::InteriorSamples,
                     format!("{a}: a budget above {MAX_INTERIOR_SAMPLES} per cell"),
                 ));
             }
         }
         if v.layouts.is_empty() {
-            return Err(Error::bad_param("layouts", "names no layout"));
+            return Err(Error::bad_param(Param::Layouts, "names no layout"));
         }
         if let Some(k) = v.layouts.iter().enumerate().find_map(|(i, k)| v.layouts[..i].contains(k).then_some(k)) {
-            return Err(Error::bad_param("layouts", format!("names {k} twice")));
+            return Err(Error::bad_param(Param::Layouts, format!("names {k} twice")));
         }
         if !(0.0..=MAX_LOD_DRAW_TOLERANCE).contains(&v.lod_draw_tolerance) {
             return Err(Error::bad_param(
-                "lod_draw_tolerance",
+                Param::LodDrawTolerance,
                 format!("{} texels is outside 0..={MAX_LOD_DRAW_TOLERANCE}", v.lod_draw_tolerance),
             ));
         }
         if let Some(FloorTest::BoxWithin(m)) =
             v.zero_dov_floor.iter().find(|t| matches!(t, FloorTest::BoxWithin(m) if !(m.is_finite() && *m >= 0.0)))
         {
-            return Err(Error::bad_param("zero_dov_floor", format!("box margin {m} must be a finite length >= 0")));
+            return Err(Error::bad_param(Param::ZeroDovFloor, format!("box margin {m} must be a finite length >= 0")));
         }
         if let Some(s) = v.shard {
-            Shard::new(s.index, s.count).map_err(|r| Error::bad_param("shard", r))?;
+            Shard::new(s.index, s.count).map_err(|r| Error::bad_param(Param::Shard, r))?;
             let cells = grid.map_or(MAX_CELLS, |g| g.cell_count() as u64);
             if u64::from(s.count) > cells {
-                return Err(Error::bad_param("shard", format!("{s}: more shards than the {cells} cells")));
+                return Err(Error::bad_param(Param::Shard, format!("{s}: more shards than the {cells} cells")));
             }
         }
         if let Some(g) = grid {
@@ -495,13 +495,13 @@ impl BuildParams {
 /// [`limits::MAX_SAMPLE_POINTS`], in integers that cannot overflow.
 pub fn check_grid(grid: &ViewGrid, interior_samples: u32) -> Result<()> {
     use limits::*;
-    grid.check().map_err(|r| Error::bad_param("grid", r))?;
+    grid.check().map_err(|r| Error::bad_param(Param::Grid, r))?;
     let [nx, ny, nz] = grid.dims.map(u64::from);
     // Three u32 counts multiply to 96 bits at most.
     let cells = u128::from(nx) * u128::from(ny) * u128::from(nz);
     if cells > u128::from(MAX_CELLS) {
         return Err(Error::bad_param(
-            "grid",
+            Param::Grid,
             format!("{nx}x{ny}x{nz} is more than {MAX_CELLS} cells; use fewer or larger cells"),
         ));
     }
@@ -509,53 +509,13 @@ pub fn check_grid(grid: &ViewGrid, interior_samples: u32) -> Result<()> {
     let points = (nx + 1) * (ny + 1) * (nz + 1) + cells as u64 * u64::from(interior_samples);
     if points > MAX_SAMPLE_POINTS {
         return Err(Error::bad_param(
-            "interior_samples",
+            Param::InteriorSamples,
             format!(
                 "{nx}x{ny}x{nz} cells with {interior_samples} interior points each is {points} sample points, more than {MAX_SAMPLE_POINTS}"
             ),
         ));
     }
     Ok(())
-}
-
-/// Serde for one value through its `Display` and `FromStr` (the manifest keeps readable names).
-mod name {
-    use std::fmt::Display;
-    use std::str::FromStr;
-
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<T: Display, S: Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(v)
-    }
-
-    pub fn deserialize<'de, T, D>(d: D) -> Result<T, D::Error>
-    where
-        T: FromStr<Err: Display>,
-        D: Deserializer<'de>,
-    {
-        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-/// Serde for a list of values through their names, as [`name`].
-mod names {
-    use std::fmt::Display;
-    use std::str::FromStr;
-
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<T: Display, S: Serializer>(v: &[T], s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(v.iter().map(|x| x.to_string()))
-    }
-
-    pub fn deserialize<'de, T, D>(d: D) -> Result<Vec<T>, D::Error>
-    where
-        T: FromStr<Err: Display>,
-        D: Deserializer<'de>,
-    {
-        Vec::<String>::deserialize(d)?.iter().map(|x| x.parse().map_err(serde::de::Error::custom)).collect()
-    }
 }
 
 #[cfg(test)]

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 pub use crate::camera::Camera;
 use crate::db::Database;
 use crate::db::access::{Access, PageIo};
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
 use crate::geom::Aabb;
 use hdov_storage::LayoutKind;
@@ -269,8 +269,9 @@ pub struct Answer {
     pub mode: Mode,
     /// The DoV threshold η asked with.
     pub eta: f64,
-    /// The V-page layout read (`review`: REVIEW read the tree alone).
-    pub layout: String,
+    /// The V-page layout read (`null` in JSON for REVIEW, which reads the tree alone).
+    #[serde(with = "crate::format::by_name::optional")]
+    pub layout: Option<LayoutKind>,
     /// What to draw.
     pub items: Vec<Item>,
     /// What finding it cost.
@@ -286,7 +287,7 @@ impl Answer {
         at: Vec3,
         (cell, cell_id): ([u32; 3], u32),
         params: &QueryParams,
-        layout: String,
+        layout: Option<LayoutKind>,
         items: Vec<Item>,
         stats: QueryStats,
         warnings: Vec<String>,
@@ -323,18 +324,18 @@ impl Database {
             out.items.retain(|i| frustum.meets(&i.mbr));
         }
         let stats = QueryStats::new(access.io(), out.nodes_visited, &out.items, out.over_budget, start);
-        Ok(Answer::new(at, (cell, cell_id), params, access.layout_name(), out.items, stats, warnings))
+        Ok(Answer::new(at, (cell, cell_id), params, access.layout_kind(), out.items, stats, warnings))
     }
 
     /// The cell holding `at` (points on an inner cell border belong to the upper cell).
     pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
         let grid =
-            self.grid().ok_or_else(|| Error::bad_param("at", format!("{} holds no grid", self.dir().display())))?;
+            self.grid().ok_or_else(|| Error::bad_param(Param::At, format!("{} holds no grid", self.dir().display())))?;
         if !at.is_finite() {
-            return Err(Error::bad_param("at", format!("{:?} is not a finite point", at.to_array())));
+            return Err(Error::bad_param(Param::At, format!("{:?} is not a finite point", at.to_array())));
         }
         let cell = grid.cell_of(at).ok_or_else(|| {
-            Error::bad_param("at", format!("{:?} lies outside the grid {:?}", at.to_array(), grid.region.to_array()))
+            Error::bad_param(Param::At, format!("{:?} lies outside the grid {:?}", at.to_array(), grid.region.to_array()))
         })?;
         Ok((cell, grid.cell_id(cell) as u32))
     }
@@ -343,13 +344,13 @@ impl Database {
     fn check_query(&self, p: &QueryParams) -> Result<Vec<String>> {
         let mut warnings = Vec::new();
         if !(0.0..=1.0).contains(&p.eta) {
-            return Err(Error::bad_param("eta", format!("{} is not in [0, 1]", p.eta)));
+            return Err(Error::bad_param(Param::Eta, format!("{} is not in [0, 1]", p.eta)));
         }
         if !(p.tau.is_finite() && p.tau > 0.0) {
-            return Err(Error::bad_param("tau", format!("{} pixels must be finite and > 0", p.tau)));
+            return Err(Error::bad_param(Param::Tau, format!("{} pixels must be finite and > 0", p.tau)));
         }
         if let Some(cam) = &p.camera {
-            cam.check().map_err(|r| Error::bad_param("camera", r))?;
+            cam.check().map_err(|r| Error::bad_param(Param::Camera, r))?;
         }
         if let Some(r) = self.manifest().build.visibility.as_ref().map(|v| v.resolution) {
             // One face-centre texel's share of the sphere (CubeMap::texel_floor, without the map).

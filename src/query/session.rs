@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use super::{Answer, Camera, Item, QueryParams};
 use crate::db::Database;
 use crate::db::access::Access;
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
 use hdov_storage::{CacheLimits, PolicyKind};
 
@@ -241,7 +241,7 @@ impl Database {
 /// Refuses a session camera that cannot be used.
 pub(crate) fn check_camera(params: &SessionParams) -> Result<()> {
     match &params.query.camera {
-        Some(cam) => cam.check().map_err(|r| Error::bad_param("camera", r)),
+        Some(cam) => cam.check().map_err(|r| Error::bad_param(Param::Camera, r)),
         None => Ok(()),
     }
 }

@@ -20,7 +20,7 @@ use glam::{Mat4, Vec3};
 
 use crate::camera::{Camera, Frustum};
 use crate::db::Database;
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
 use crate::gfx::{Gpu, Vertex, padded_row_bytes, push_world};
 use crate::query::{Answer, Item, ItemKind, Session};
@@ -84,15 +84,15 @@ impl View {
     /// Checks the numbers; the error names the parameter.
     pub fn check(&self) -> Result<()> {
         if !self.eye.is_finite() {
-            return Err(Error::bad_param("at", format!("{:?} is not a finite point", self.eye.to_array())));
+            return Err(Error::bad_param(Param::At, format!("{:?} is not a finite point", self.eye.to_array())));
         }
         if self.width == 0 || self.height == 0 {
-            return Err(Error::bad_param("size", format!("{}×{} has no pixels", self.width, self.height)));
+            return Err(Error::bad_param(Param::Size, format!("{}×{} has no pixels", self.width, self.height)));
         }
         if !(self.near.is_finite() && self.near > 0.0) {
-            return Err(Error::bad_param("near", format!("{} must be finite and > 0", self.near)));
+            return Err(Error::bad_param(Param::Near, format!("{} must be finite and > 0", self.near)));
         }
-        self.camera().check().map_err(|r| Error::bad_param("camera", r))
+        self.camera().check().map_err(|r| Error::bad_param(Param::Camera, r))
     }
 
     /// Unit forward, right and up vectors ([`crate::camera::basis`], as [`Camera::frustum`]).
@@ -500,7 +500,7 @@ impl Renderer {
     /// [`Image::ids`] are indices into those items. Errors before the session's first step.
     pub fn render_session(&self, session: &Session, view: &View) -> Result<Image> {
         if session.answer().is_none() {
-            return Err(Error::bad_param("fidelity", "the session has taken no step yet"));
+            return Err(Error::bad_param(Param::Fidelity, "the session has taken no step yet"));
         }
         let items = session.frame_items(view.eye, Some(view.look));
         self.render_items(session.database(), &items, view, ColorMode::Shaded)

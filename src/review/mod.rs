@@ -25,6 +25,7 @@ use glam::Vec3;
 
 #[cfg(doc)]
 use crate::db::Database;
+use crate::error::Param;
 use crate::geom::Aabb;
 
 /// The thesis's eyesight: the depth of the view frustum, 1 km.
@@ -66,19 +67,19 @@ impl Default for ReviewParams {
 }
 
 impl ReviewParams {
-    /// Checks the numbers; returns the parameter's name and the reason of the first bad one.
-    pub fn check(&self) -> Result<(), (&'static str, String)> {
+    /// Checks the numbers; returns the parameter and the reason of the first bad one.
+    pub fn check(&self) -> Result<(), (Param, String)> {
         if !(self.review_box.is_finite() && self.review_box >= 1.0) {
-            return Err(("review_box", format!("{} must be finite and >= 1", self.review_box)));
+            return Err((Param::ReviewBox, format!("{} must be finite and >= 1", self.review_box)));
         }
         if !(self.eyesight.is_finite() && self.eyesight > 0.0) {
-            return Err(("eyesight", format!("{} must be finite and > 0", self.eyesight)));
+            return Err((Param::Eyesight, format!("{} must be finite and > 0", self.eyesight)));
         }
         if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
-            return Err(("fov", format!("{}° is not in (0, 180)", self.fov_deg)));
+            return Err((Param::Fov, format!("{}° is not in (0, 180)", self.fov_deg)));
         }
         if !(self.prefetch_k.is_finite() && self.prefetch_k >= 0.0) {
-            return Err(("prefetch_k", format!("{} must be finite and >= 0", self.prefetch_k)));
+            return Err((Param::PrefetchK, format!("{} must be finite and >= 0", self.prefetch_k)));
         }
         Ok(())
     }

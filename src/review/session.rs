@@ -11,7 +11,7 @@ use super::{HISTORY_MAX, ReviewParams, disk_cell, dplru_priority, frustum_cell, 
 use crate::camera::distance_to_box;
 use crate::db::Database;
 use crate::db::access::Access;
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::geom::Aabb;
 use crate::query::{Answer, CellMethod, Item, ItemKind, QueryParams, QueryStats, Session, SessionParams, Step};
 use crate::rtree::Entry;
@@ -108,7 +108,7 @@ impl CellMethod for Review {
         step: &mut Step,
     ) -> Result<Option<Answer>> {
         if !at.is_finite() {
-            return Err(Error::bad_param("at", format!("{:?} is not a finite point", at.to_array())));
+            return Err(Error::bad_param(Param::At, format!("{:?} is not a finite point", at.to_array())));
         }
         let db = access.db();
         let start = Instant::now();
@@ -136,7 +136,7 @@ impl CellMethod for Review {
         let items: Vec<Item> = self.buffer.values().filter(|i| i.mbr.intersects(&disk)).cloned().collect();
         let stats = QueryStats::new(access.io(), nodes, &items, false, start);
         self.flipping = Some(disk);
-        Ok(Some(Answer::new(at, cell, &self.query, "review".into(), items, stats, Vec::new())))
+        Ok(Some(Answer::new(at, cell, &self.query, None, items, stats, Vec::new())))
     }
 
     /// What delta loading evicted leaves the buffer; then only the new cell's objects are known

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use super::probe::{RayCaster, SurfaceTargets};
 use super::{CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_count, cubemap};
-use crate::error::{Error, Result};
+use crate::error::{Error, Param, Result};
 use crate::scene::Scene;
 
 mod bvh;
@@ -264,23 +264,23 @@ fn wide_instructions() -> bool {
 pub(crate) fn check_resolution_and_near(resolution: u32, near: f32) -> Result<()> {
     let max = super::cubemap::MAX_RESOLUTION;
     if resolution == 0 || resolution > max {
-        return Err(Error::bad_param("resolution", format!("{resolution} is not in 1..={max}")));
+        return Err(Error::bad_param(Param::Resolution, format!("{resolution} is not in 1..={max}")));
     }
     if !(near.is_finite() && near > 0.0) {
-        return Err(Error::bad_param("near", format!("{near} must be finite and > 0")));
+        return Err(Error::bad_param(Param::Near, format!("{near} must be finite and > 0")));
     }
     Ok(())
 }
 
 pub(crate) fn check_point(p: Vec3) -> Result<()> {
-    if p.is_finite() { Ok(()) } else { Err(Error::bad_param("point", format!("{p} is not finite"))) }
+    if p.is_finite() { Ok(()) } else { Err(Error::bad_param(Param::Point, format!("{p} is not finite"))) }
 }
 
 pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
     let r = resolution as usize;
     if out.resolution != resolution || out.ids.len() != cubemap::FACE_COUNT * r * r {
         return Err(Error::bad_param(
-            "id cube",
+            Param::IdCube,
             format!("resolution {} does not match the backend's {resolution}", out.resolution),
         ));
     }

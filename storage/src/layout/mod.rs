@@ -28,8 +28,8 @@ use crate::pagefile::{MIN_PAGE_SIZE, PageFile, ReadMode};
 use crate::vpage::{DovCodec, SparseCodec, VData, VDataStats, VEntry, VPageCodec};
 use packing::{Addr, PagedFile, record_pages};
 
-/// Which layout.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// Which layout. Ordered as [`LayoutKind::ALL`] lists them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum LayoutKind {
     Horizontal,
     Vertical,

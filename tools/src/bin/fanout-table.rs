@@ -75,7 +75,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .map(|&eta| mean(&QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() }))
             .collect::<Result<_, _>>()?;
-        let bytes = ["horizontal", "vertical", "indexed-vertical"].map(|k| info.layouts.get(k).map_or(0, |l| l.bytes));
+        let bytes = hdov_storage::LayoutKind::ALL.map(|k| info.layouts.get(&k).map_or(0, |l| l.bytes));
         let (nodes, height) = (info.nodes, info.tree.height);
         println!(
             "| {m} | {nodes} | {height} | {} | {:.1} | {} |",

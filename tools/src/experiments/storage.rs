@@ -48,7 +48,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         }
         let objects_per_cell = objects as f64 / centres.len() as f64;
         for (i, name) in LAYOUTS.iter().enumerate() {
-            let Some(l) = info.layouts.get(*name) else { continue };
+            let Some((_, l)) = info.layouts.iter().find(|(k, _)| k.name() == *name) else { continue };
             let nodes = l.visible_nodes_per_cell.mean;
             let entries = objects_per_cell + (nodes - 1.0).max(0.0);
             let per_visible_entry = l.vpage_bytes as f64 / (entries * info.cells as f64).max(1.0);
