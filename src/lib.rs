@@ -13,7 +13,7 @@
 //! `docs/architecture.md` draws the layers.
 //!
 //! ```
-//! use hdov::{Aabb, BackendKind, BuildParams, Database, Progress, Scene, ViewGrid, VisibilityParams};
+//! use hdov::{Aabb, BackendKind, BuildParams, Database, Overwrite, Progress, Scene, ViewGrid, VisibilityParams};
 //! use glam::Vec3;
 //!
 //! // Two boxes on a ground plate (three instances of one cube mesh), and a 2 × 1 × 2 grid of
@@ -29,7 +29,7 @@
 //!     visibility: Some(VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() }),
 //!     ..Default::default()
 //! };
-//! hdov::build(&scene, &dir.path().join("boxes.hdov"), &params, false, &Progress::hidden())?;
+//! hdov::build(&scene, &dir.path().join("boxes.hdov"), &params, Overwrite::Never, &Progress::hidden())?;
 //!
 //! let db = Database::open(&dir.path().join("boxes.hdov"))?;
 //! let info = db.info()?;
@@ -56,7 +56,9 @@ macro_rules! internal_modules {
     };
 }
 
-internal_modules!(build, camera, db, dov, error, format, geom, gfx, grid, lod, progress, query, record, rtree, scene);
+internal_modules!(
+    build, camera, db, dov, error, format, geom, gfx, grid, lod, overwrite, progress, query, record, rtree, scene
+);
 
 pub mod city;
 pub mod render;
@@ -71,11 +73,12 @@ pub use error::{Error, Param, Result};
 pub use format::Manifest;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, LodParams,
-    RayProbing, Shard, VisibilityParams,
+    RayProbing, Sampling, Shard, VisibilityParams,
 };
 pub use geom::Aabb;
 pub use grid::ViewGrid;
 pub use hdov_storage::{CacheLimits, DovCodec, Error as StorageError, LayoutKind, PolicyKind};
+pub use overwrite::Overwrite;
 pub use progress::Progress;
 pub use query::{Answer, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
 pub use rtree::TreeAlgorithm;

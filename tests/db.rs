@@ -5,6 +5,7 @@ use std::path::Path;
 use glam::Mat4;
 use hdov::scene::{BaseMesh, Object, Scene};
 
+use hdov::Overwrite;
 use hdov::format::TREE_FILE;
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
@@ -17,7 +18,7 @@ fn town(n: usize) -> Scene {
 
 fn build(dir: &Path, params: &BuildParams) -> hdov::BuildReport {
     let scene = town(8);
-    hdov::build(&scene, dir, params, false, &Progress::hidden()).unwrap()
+    hdov::build(&scene, dir, params, Overwrite::Never, &Progress::hidden()).unwrap()
 }
 
 #[test]
@@ -64,10 +65,10 @@ fn existing_database_is_kept_without_force_and_replaced_with_it() {
     let dir = tmp.path().join("db");
     build(&dir, &BuildParams::default());
     let scene = town(3);
-    let err = hdov::build(&scene, &dir, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
+    let err = hdov::build(&scene, &dir, &BuildParams::default(), Overwrite::Never, &Progress::hidden()).unwrap_err();
     assert_eq!(err.to_string(), format!("{}: exists", dir.display()), "the library names no flag");
     assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, town(8).objects.len());
-    hdov::build(&scene, &dir, &BuildParams::default(), true, &Progress::hidden()).unwrap();
+    hdov::build(&scene, &dir, &BuildParams::default(), Overwrite::Ours, &Progress::hidden()).unwrap();
     assert_eq!(Database::open(&dir).unwrap().manifest().counts.objects as usize, scene.objects.len());
     // No temporary directory is left beside the target.
     let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
@@ -87,7 +88,8 @@ fn empty_meshes_are_refused() {
             mesh: scene.meshes.len() as u32 - 1,
             transform: Mat4::IDENTITY,
         });
-        let err = hdov::build(&scene, &out, &BuildParams::default(), false, &Progress::hidden()).unwrap_err();
+        let err =
+            hdov::build(&scene, &out, &BuildParams::default(), Overwrite::Never, &Progress::hidden()).unwrap_err();
         assert!(err.to_string().starts_with("scene: mesh 'hollow': no triangles"), "{err}");
         assert!(std::fs::read_dir(tmp.path()).unwrap().next().is_none(), "nothing written");
     }

@@ -13,6 +13,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use hdov::Overwrite;
 use hdov::dov::BackendKind;
 use hdov::format::catalog::{Catalog, LodRef};
 use hdov::format::tree_page::NodePage;
@@ -128,7 +129,7 @@ fn build(dir: &Path, dims: [u32; 3]) {
         visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
-    hdov::build(&town(5, dims), dir, &params, false, &Progress::hidden()).unwrap();
+    hdov::build(&town(5, dims), dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
 }
 
 fn fixture() -> Fixture {

@@ -1,6 +1,7 @@
 //! The three V-page layouts written by `hdov build` for a generated city hold the same
 //! V-entries, and those are exactly what the DoV precompute produced.
 
+use hdov::Overwrite;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::BackendKind;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
@@ -27,7 +28,7 @@ fn fixture() -> Fixture {
         visibility: Some(VisibilityParams { resolution: RESOLUTION, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
-    hdov::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
+    hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
     // The same measurement, independently: the tree is deterministic, so are its V-pages.
     let tree = RTree::build(&scene.all_object_bounds(), hdov::format::tree_page::fanout(512), params.tree);
     let shape =

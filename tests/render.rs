@@ -6,6 +6,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
+use hdov::Overwrite;
 use hdov::dov::BackendKind;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -25,7 +26,7 @@ fn city(dir: &Path) -> Database {
         visibility: Some(VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
-    hdov::build(&scene, dir, &params, false, &Progress::hidden()).unwrap();
+    hdov::build(&scene, dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
     Database::open(dir).unwrap()
 }
 

@@ -5,6 +5,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use glam::Vec3;
+use hdov::Overwrite;
 use hdov::dov::BackendKind;
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -145,7 +146,7 @@ fn city(dir: &Path) -> Database {
         visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
     };
-    hdov::build(&scene, dir, &params, false, &Progress::hidden()).unwrap();
+    hdov::build(&scene, dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
     Database::open(dir).unwrap()
 }
 

@@ -16,6 +16,7 @@ use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
 use crate::format::{CATALOG_FILE, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
 use crate::grid::ViewGrid;
+use crate::overwrite::Overwrite;
 
 /// One shard database, checked to be a shard: its visibility parameters, results and grid.
 struct ShardDb {
@@ -49,7 +50,7 @@ impl ShardDb {
 /// and it is an hdov database or an empty directory. Every shard is opened and validated, and
 /// the set is refused in one line unless the shards share one build (parameters, grid and
 /// byte-identical tree, geometry and catalog) and cover every part exactly once.
-pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> {
+pub fn merge(shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
     let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shard databases given"))?;
     let dbs = shards.iter().map(|p| ShardDb::open(p)).collect::<Result<Vec<_>>>()?;
     let first = &dbs[0];
@@ -96,7 +97,7 @@ pub fn merge(shards: &[PathBuf], out: &Path, replace: bool) -> Result<Manifest> 
         return Err(Error::bad_param(Param::Shards, format!("shard {missing}/{count} is missing")));
     }
 
-    let txn = begin_write(out, replace)?;
+    let txn = begin_write(out, overwrite)?;
     for f in invariant_files {
         let (from, to) = (first.db.dir().join(f), txn.path().join(f));
         let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;

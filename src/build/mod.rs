@@ -30,7 +30,8 @@ use crate::lod::{LodLevel, build_scene_lods};
 use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
-use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, Overwrite, PageFileWriter, VData, write_layout};
+use crate::overwrite::Overwrite;
+use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, PageFileWriter, VData, write_layout};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]
@@ -50,17 +51,20 @@ pub struct BuildReport {
     pub restored: Option<PathBuf>,
 }
 
-/// Claims `out` for writing: refuses an existing `out` unless `replace` and it is an hdov
+/// Claims `out` for writing: refuses an existing `out` unless `overwrite` allows ours and it is an hdov
 /// database or an empty directory; removes leftovers of dead builds beside it.
-pub(crate) fn begin_write(out: &Path, replace: bool) -> Result<DirTxn> {
-    let overwrite = if replace { Overwrite::IfOurs(is_database) } else { Overwrite::Never };
+pub(crate) fn begin_write(out: &Path, overwrite: Overwrite) -> Result<DirTxn> {
+    let overwrite = match overwrite {
+        Overwrite::Never => hdov_storage::Overwrite::Never,
+        Overwrite::Ours => hdov_storage::Overwrite::IfOurs(is_database),
+    };
     Ok(DirTxn::begin(out, overwrite)?)
 }
 
 /// Builds the database for `scene` at `out`.
 ///
 /// Every parameter, the scene and the grid are checked first, then the target is claimed: an
-/// existing `out` is refused unless `replace` is set and `out` is an hdov database or an empty
+/// existing `out` is refused unless `overwrite` is [`Overwrite::Ours`] and `out` is an hdov database or an empty
 /// directory (a folder of anything else is never touched). On any error, and if the process
 /// dies, `out` is left as it was. Costs the tree (O(n log n)), the LODs (meshopt, linear in the
 /// faces) and, with visibility, one cube map per distinct sample point.
@@ -68,14 +72,14 @@ pub fn build(
     scene: &Scene,
     out: &Path,
     params: &BuildParams,
-    replace: bool,
+    overwrite: Overwrite,
     progress: &Progress,
 ) -> Result<BuildReport> {
     scene.check().map_err(|r| Error::bad_param(Param::Scene, r))?;
     params.check(scene.grid.as_ref())?;
     let fanout = params.max_entries();
     // Claim the target first: a refusal must come before minutes of work, not after.
-    let txn = begin_write(out, replace)?;
+    let txn = begin_write(out, overwrite)?;
     let (cleaned, restored) = (txn.cleaned().to_vec(), txn.restored().map(Path::to_path_buf));
 
     let t = Instant::now();
@@ -231,15 +235,15 @@ fn build_visibility(
     let t = Instant::now();
     let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, ..Default::default() };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
-    if v.probe.is_some() {
+    if v.sampling.probe().is_some() {
         backend = WithRays::wrap(backend, scene)?;
     }
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let options = PrecomputeOptions {
-        interior_samples: v.interior_samples,
-        adaptive: v.adaptive,
-        probe: v.probe,
+        interior_samples: v.sampling.interior_samples(),
+        adaptive: v.sampling.adaptive(),
+        probe: v.sampling.probe(),
         zero_dov_tests: v.zero_dov_floor.clone(),
         ..Default::default()
     };

@@ -8,8 +8,8 @@ use serde_json::json;
 use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
 use hdov::{
-    Aabb, AdaptiveSampling, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info,
-    LayoutKind, Manifest, Param, Progress, RayProbing, Result, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
+    Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info, LayoutKind, Manifest,
+    Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
 };
 
 #[derive(Args)]
@@ -93,8 +93,8 @@ pub struct VisibilityArgs {
     /// objects appear, at most BUDGET per cell, or `probe[:POINTS:RAYS]`: rays from POINTS points
     /// of each cell towards the objects its neighbourhood sees, RAYS per point and object
     /// (docs/dov.md).
-    #[arg(long, default_value = "corners", value_parser = parse_samples)]
-    samples: Samples,
+    #[arg(long, default_value = "corners")]
+    samples: Sampling,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
     #[arg(long, default_value = "auto")]
     backend: BackendKind,
@@ -129,7 +129,7 @@ impl VisibilityArgs {
             return Ok(None);
         }
         let default_floor = match self.samples {
-            Samples::Probe(_) => "box",
+            Sampling::Probe(_) => "box",
             _ => "box,neighbours",
         };
         let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();
@@ -139,18 +139,7 @@ impl VisibilityArgs {
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
-            interior_samples: match self.samples {
-                Samples::Interior(k) => k,
-                _ => 0,
-            },
-            adaptive: match self.samples {
-                Samples::Adaptive(a) => Some(a),
-                _ => None,
-            },
-            probe: match self.samples {
-                Samples::Probe(p) => Some(p),
-                _ => None,
-            },
+            sampling: self.samples,
             layouts: self.layouts.clone(),
             dov_codec: self.dov_codec,
             shard: self.shard,
@@ -160,32 +149,6 @@ impl VisibilityArgs {
                 .collect::<Result<_>>()?,
         }))
     }
-}
-
-/// What `--samples` chose: fixed interior points (0 = corners only), the adaptive sampler or ray
-/// probing.
-#[derive(Clone, Copy, Debug)]
-enum Samples {
-    Interior(u32),
-    Adaptive(AdaptiveSampling),
-    Probe(RayProbing),
-}
-
-fn parse_samples(s: &str) -> std::result::Result<Samples, String> {
-    if s == "corners" {
-        return Ok(Samples::Interior(0));
-    }
-    if s.starts_with("adaptive") {
-        return s.parse().map(Samples::Adaptive);
-    }
-    if s.starts_with("probe") {
-        return s.parse().map(Samples::Probe);
-    }
-    s.parse().map(Samples::Interior).map_err(|_| {
-        format!(
-            "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET] nor probe[:POINTS:RAYS]"
-        )
-    })
 }
 
 #[derive(Args)]
@@ -251,7 +214,7 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
     let scene = hdov::city::generate(&city)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let path = out.join("city.json");
-    scene.write_manifest(&path, replace)?;
+    scene.write_manifest(&path, overwrite(replace))?;
     Ok(path)
 }
 
@@ -270,7 +233,7 @@ pub fn build(a: BuildArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     scene.grid = Some(ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)?);
-    let report = hdov::build(&scene, &a.out, &params, a.force, &Progress::for_terminal(a.json))?;
+    let report = hdov::build(&scene, &a.out, &params, overwrite(a.force), &Progress::for_terminal(a.json))?;
     report_cleaned(&report);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).expect("serialisable"));
@@ -432,7 +395,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             g.cell_count()
         );
     }
-    let report = hdov::build(&scene, &db_path, &params, true, &Progress::for_terminal(a.json))?;
+    let report = hdov::build(&scene, &db_path, &params, Overwrite::Ours, &Progress::for_terminal(a.json))?;
     report_cleaned(&report);
     if !a.json {
         println!("scene: {}", scene_path.display());
@@ -461,7 +424,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 }
 
 pub fn merge(a: MergeArgs) -> Result<()> {
-    let m = hdov::merge(&a.shards, &a.out, a.force)?;
+    let m = hdov::merge(&a.shards, &a.out, overwrite(a.force))?;
     let (cells, points) = m.visibility.as_ref().map_or((0, 0), |v| (v.cells_computed, v.sample_points));
     println!("{}: merged {} shards, {cells} cells, {points} sample points", a.out.display(), a.shards.len());
     Ok(())
@@ -500,4 +463,9 @@ pub fn dov(a: DovArgs) -> Result<()> {
         println!("  {:>10.6}  {} (#{id})", d, scene.objects[id as usize].name);
     }
     Ok(())
+}
+
+/// `--force`: replace what hdov wrote there before, never anything else.
+fn overwrite(force: bool) -> Overwrite {
+    if force { Overwrite::Ours } else { Overwrite::Never }
 }

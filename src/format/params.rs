@@ -352,6 +352,108 @@ impl Default for BuildParams {
     }
 }
 
+/// Where a build samples each cell besides its 8 shared corners: one choice of three.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(into = "SamplingFields", try_from = "SamplingFields")]
+pub enum Sampling {
+    /// This many stratified (Halton) interior points per cell; 0 = the corners alone (the
+    /// thesis, and the default).
+    Interior(u32),
+    /// Adaptive points where new objects appear (`adaptive:SEEDS:BUDGET`).
+    Adaptive(AdaptiveSampling),
+    /// Rays aimed at what the cell's neighbourhood sees (`probe:POINTS:RAYS`).
+    Probe(RayProbing),
+}
+
+impl Default for Sampling {
+    fn default() -> Self {
+        Sampling::Interior(0)
+    }
+}
+
+impl Sampling {
+    /// Fixed interior points per cell.
+    pub fn interior_samples(self) -> u32 {
+        if let Sampling::Interior(k) = self { k } else { 0 }
+    }
+
+    /// The adaptive sampler, if chosen.
+    pub fn adaptive(self) -> Option<AdaptiveSampling> {
+        if let Sampling::Adaptive(a) = self { Some(a) } else { None }
+    }
+
+    /// Ray probing, if chosen.
+    pub fn probe(self) -> Option<RayProbing> {
+        if let Sampling::Probe(p) = self { Some(p) } else { None }
+    }
+
+    /// The most interior points a cell can take.
+    pub fn max_points_per_cell(self) -> u32 {
+        self.interior_samples() + self.adaptive().map_or(0, |a| a.budget)
+    }
+}
+
+impl std::fmt::Display for Sampling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Sampling::Interior(0) => f.write_str("corners"),
+            Sampling::Interior(k) => write!(f, "{k}"),
+            Sampling::Adaptive(a) => a.fmt(f),
+            Sampling::Probe(p) => p.fmt(f),
+        }
+    }
+}
+
+impl std::str::FromStr for Sampling {
+    type Err = String;
+    /// `corners`, a count of interior points, `adaptive[:SEEDS:BUDGET]` or `probe[:POINTS:RAYS]`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if s == "corners" {
+            return Ok(Sampling::Interior(0));
+        }
+        if s.starts_with("adaptive") {
+            return s.parse().map(Sampling::Adaptive);
+        }
+        if s.starts_with("probe") {
+            return s.parse().map(Sampling::Probe);
+        }
+        s.parse().map(Sampling::Interior).map_err(|_| {
+            format!(
+                "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET] nor probe[:POINTS:RAYS]"
+            )
+        })
+    }
+}
+
+/// [`Sampling`] as the manifest records it: `interior_samples` always, `adaptive` and `probe`
+/// only when chosen, so manifests of other builds read and write unchanged.
+#[derive(Serialize, Deserialize)]
+struct SamplingFields {
+    interior_samples: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    adaptive: Option<AdaptiveSampling>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    probe: Option<RayProbing>,
+}
+
+impl From<Sampling> for SamplingFields {
+    fn from(s: Sampling) -> Self {
+        SamplingFields { interior_samples: s.interior_samples(), adaptive: s.adaptive(), probe: s.probe() }
+    }
+}
+
+impl TryFrom<SamplingFields> for Sampling {
+    type Error = String;
+    fn try_from(f: SamplingFields) -> std::result::Result<Self, String> {
+        match (f.interior_samples, f.adaptive, f.probe) {
+            (k, None, None) => Ok(Sampling::Interior(k)),
+            (0, Some(a), None) => Ok(Sampling::Adaptive(a)),
+            (0, None, Some(p)) => Ok(Sampling::Probe(p)),
+            _ => Err("more than one sampler (interior_samples, adaptive, probe)".into()),
+        }
+    }
+}
+
 /// How DoV is measured and stored.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VisibilityParams {
@@ -359,16 +461,10 @@ pub struct VisibilityParams {
     pub resolution: u32,
     /// Which backend measures the DoV.
     pub backend: BackendKind,
-    /// Stratified interior sample points per cell, besides the 8 shared corners.
-    pub interior_samples: u32,
-    /// Adaptive sample points per cell after the corners (`"adaptive:SEEDS:BUDGET"` in the
-    /// manifest, absent when off, so manifests of other builds are unchanged).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub adaptive: Option<AdaptiveSampling>,
-    /// Ray probing after the measured points (`"probe:POINTS:RAYS"` in the manifest, absent when
-    /// off).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub probe: Option<RayProbing>,
+    /// Where each cell is sampled besides its 8 shared corners (in the manifest as the fields
+    /// `interior_samples`, `adaptive` and `probe`, as before there was one choice).
+    #[serde(flatten)]
+    pub sampling: Sampling,
     /// Layouts to write.
     #[serde(with = "super::by_name::list")]
     pub layouts: Vec<LayoutKind>,
@@ -391,9 +487,7 @@ impl Default for VisibilityParams {
         Self {
             resolution: 128,
             backend: BackendKind::Auto,
-            interior_samples: 0,
-            adaptive: None,
-            probe: None,
+            sampling: Sampling::default(),
             layouts: LayoutKind::ALL.to_vec(),
             dov_codec: DovCodec::F32,
             shard: None,
@@ -444,13 +538,14 @@ impl BuildParams {
         if !(1..=MAX_RESOLUTION).contains(&v.resolution) {
             return Err(Error::bad_param(Param::Resolution, format!("{} is outside 1..={MAX_RESOLUTION}", v.resolution)));
         }
-        if v.interior_samples > MAX_INTERIOR_SAMPLES {
+        let k = v.sampling.interior_samples();
+        if k > MAX_INTERIOR_SAMPLES {
             return Err(Error::bad_param(
                 Param::InteriorSamples,
-                format!("{} is above {MAX_INTERIOR_SAMPLES} per cell", v.interior_samples),
+                format!("{k} is above {MAX_INTERIOR_SAMPLES} per cell"),
             ));
         }
-        if let Some(a) = v.adaptive {
+        if let Some(a) = v.sampling.adaptive() {
             AdaptiveSampling::new(a.seeds, a.budget).map_err(|r| Error::bad_param(Param::InteriorSamples, r))?;
             if a.budget > MAX_INTERIOR_SAMPLES {
                 return Err(Error::bad_param(
@@ -485,7 +580,7 @@ impl BuildParams {
         }
         if let Some(g) = grid {
             // The adaptive budget is the most a cell can take.
-            check_grid(g, v.interior_samples + v.adaptive.map_or(0, |a| a.budget))?;
+            check_grid(g, v.sampling.max_points_per_cell())?;
         }
         Ok(())
     }
@@ -526,17 +621,17 @@ mod tests {
 
     #[test]
     fn manifest_names_round_trip() {
-        let p = BuildParams {
+        let with = |sampling| BuildParams {
             visibility: Some(VisibilityParams {
                 shard: Some(Shard::new(1, 3).unwrap()),
                 zero_dov_floor: vec![FloorTest::BoxWithin(2.5), FloorTest::NeighbourCorners],
                 dov_codec: DovCodec::LogU16,
-                adaptive: Some(AdaptiveSampling { seeds: 3, budget: 24 }),
-                probe: Some(RayProbing { points: 16, rays: 2 }),
+                sampling,
                 ..Default::default()
             }),
             ..Default::default()
         };
+        let p = with(Sampling::Adaptive(AdaptiveSampling { seeds: 3, budget: 24 }));
         let json = serde_json::to_value(&p).unwrap();
         let v = &json["visibility"];
         assert_eq!(v["layouts"], serde_json::json!(["horizontal", "vertical", "indexed-vertical"]));
@@ -544,8 +639,33 @@ mod tests {
         assert_eq!(v["shard"], serde_json::json!([1, 3]));
         assert_eq!(v["dov_codec"], "log-u16");
         assert_eq!(v["adaptive"], "adaptive:3:24");
-        assert_eq!(v["probe"], "probe:16:2");
+        assert_eq!(v["interior_samples"], 0);
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+        let p = with(Sampling::Probe(RayProbing { points: 16, rays: 2 }));
+        let json = serde_json::to_value(&p).unwrap();
+        assert_eq!(json["visibility"]["probe"], "probe:16:2");
+        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+        let p = with(Sampling::Interior(5));
+        let json = serde_json::to_value(&p).unwrap();
+        assert_eq!(json["visibility"]["interior_samples"], 5);
+        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+    }
+
+    #[test]
+    fn a_manifest_naming_two_samplers_is_refused() {
+        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
+        json["visibility"]["interior_samples"] = serde_json::json!(4);
+        json["visibility"]["probe"] = serde_json::json!("probe:8:2");
+        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("more than one sampler"));
+    }
+
+    #[test]
+    fn sampling_names_round_trip() {
+        for s in ["corners", "7", "adaptive:2:16", "probe:32:4"] {
+            assert_eq!(s.parse::<Sampling>().unwrap().to_string(), s);
+        }
+        assert_eq!("adaptive".parse::<Sampling>().unwrap(), Sampling::Adaptive(AdaptiveSampling::DEFAULT));
+        assert!("halton".parse::<Sampling>().is_err());
     }
 
     #[test]
@@ -553,7 +673,7 @@ mod tests {
         let json = serde_json::to_value(BuildParams::default()).unwrap();
         assert!(json["visibility"].get("adaptive").is_none());
         assert!(json["visibility"].get("probe").is_none());
-        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap().visibility.unwrap().adaptive, None);
+        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap().visibility.unwrap().sampling.adaptive(), None);
         let mut json = serde_json::to_value(BuildParams::default()).unwrap();
         json["visibility"]["adaptive"] = serde_json::json!("adaptive:0:3");
         assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("SEEDS"));
@@ -579,11 +699,11 @@ mod tests {
         };
         assert!(with(|v| v.resolution = 0).starts_with("resolution:"));
         assert!(with(|v| v.resolution = 100_000).starts_with("resolution:"));
-        assert!(with(|v| v.interior_samples = 5000).starts_with("interior_samples:"));
+        assert!(with(|v| v.sampling = Sampling::Interior(5000)).starts_with("interior_samples:"));
         assert!(with(|v| v.layouts.clear()).starts_with("layouts:"));
-        assert!(with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 0, budget: 4 })).starts_with("interior_samples:"));
+        assert!(with(|v| v.sampling = Sampling::Adaptive(AdaptiveSampling { seeds: 0, budget: 4 })).starts_with("interior_samples:"));
         assert!(
-            with(|v| v.adaptive = Some(AdaptiveSampling { seeds: 2, budget: 5000 })).starts_with("interior_samples:")
+            with(|v| v.sampling = Sampling::Adaptive(AdaptiveSampling { seeds: 2, budget: 5000 })).starts_with("interior_samples:")
         );
         assert!(with(|v| v.layouts.push(LayoutKind::Vertical)).contains("twice"));
         assert!(with(|v| v.lod_draw_tolerance = f32::NAN).starts_with("lod_draw_tolerance:"));
@@ -595,7 +715,7 @@ mod tests {
         assert!(p.check(Some(&grid([100_000, 1, 100_000]))).unwrap_err().to_string().starts_with("grid:"));
         assert!(p.check(Some(&grid([u32::MAX, u32::MAX, u32::MAX]))).unwrap_err().to_string().starts_with("grid:"));
         let many = BuildParams {
-            visibility: Some(VisibilityParams { interior_samples: 4096, ..Default::default() }),
+            visibility: Some(VisibilityParams { sampling: Sampling::Interior(4096), ..Default::default() }),
             ..Default::default()
         };
         assert!(many.check(Some(&grid([200, 1, 200]))).unwrap_err().to_string().starts_with("interior_samples:"));

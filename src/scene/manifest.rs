@@ -14,6 +14,7 @@ use hdov_storage::{BlobFile, BlobWriter};
 use super::{BaseMesh, Mesh, Object, Scene};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
+use crate::overwrite::Overwrite;
 
 /// `"format"` value of a scene manifest.
 pub const FORMAT: &str = "hdov-scene";
@@ -56,13 +57,13 @@ fn is_scene_manifest(path: &Path) -> bool {
     std::fs::read(path).is_ok_and(|b| serde_json::from_slice::<Head>(&b).is_ok_and(|h| h.format == FORMAT))
 }
 
-/// Refuses to overwrite `path` unless `replace` and `ours` says hdov wrote it.
-fn claim(path: &Path, replace: bool, ours: bool) -> Result<()> {
+/// Refuses to overwrite `path` unless `overwrite` allows ours and `ours` says hdov wrote it.
+fn claim(path: &Path, overwrite: Overwrite, ours: bool) -> Result<()> {
     if std::fs::symlink_metadata(path).is_err() {
         return Ok(());
     }
     let path_s = path.display().to_string();
-    match (replace, ours) {
+    match (overwrite == Overwrite::Ours, ours) {
         (false, _) => Err(hdov_storage::Error::Exists { path: path_s }.into()),
         (true, false) => Err(hdov_storage::Error::NotOurs { path: path_s }.into()),
         (true, true) => Ok(()),
@@ -83,15 +84,15 @@ fn replace_file(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<
 
 impl Scene {
     /// Writes the scene as a manifest at `path` and its geometry sidecar: see [`write`].
-    pub fn write_manifest(&self, path: &Path, replace: bool) -> Result<()> {
-        write(self, path, replace)
+    pub fn write_manifest(&self, path: &Path, overwrite: Overwrite) -> Result<()> {
+        write(self, path, overwrite)
     }
 }
 
 /// Writes `path` (the JSON manifest) and its geometry sidecar (same stem, `.meshes`). Existing
-/// files are refused unless `replace` and they are a scene manifest and mesh file of hdov's;
+/// files are refused unless `overwrite` is [`Overwrite::Ours`] and they are a scene manifest and mesh file of hdov's;
 /// each is replaced whole (written beside it, synced, renamed).
-pub fn write(scene: &Scene, path: &Path, replace: bool) -> Result<()> {
+pub fn write(scene: &Scene, path: &Path, overwrite: Overwrite) -> Result<()> {
     let meshes_path = path.with_extension("meshes");
     let meshes_file = meshes_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let manifest = ManifestFile {
@@ -114,8 +115,8 @@ pub fn write(scene: &Scene, path: &Path, replace: bool) -> Result<()> {
             .collect(),
         grid: scene.grid,
     };
-    claim(path, replace, is_scene_manifest(path))?;
-    claim(&meshes_path, replace, BlobFile::open(&meshes_path, MESHES_KIND).is_ok())?;
+    claim(path, overwrite, is_scene_manifest(path))?;
+    claim(&meshes_path, overwrite, BlobFile::open(&meshes_path, MESHES_KIND).is_ok())?;
     replace_file(&meshes_path, |temp| {
         let mut blobs = BlobWriter::create(temp, MESHES_KIND)?;
         for m in &scene.meshes {
@@ -196,7 +197,7 @@ mod tests {
     fn round_trip() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        write(&scene(), &p, false).unwrap();
+        write(&scene(), &p, Overwrite::Never).unwrap();
         assert_eq!(read(&p).unwrap(), scene());
     }
 
@@ -204,18 +205,18 @@ mod tests {
     fn existing_files_are_replaced_only_if_ours() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        write(&scene(), &p, false).unwrap();
-        let err = write(&scene(), &p, false).unwrap_err().to_string();
+        write(&scene(), &p, Overwrite::Never).unwrap();
+        let err = write(&scene(), &p, Overwrite::Never).unwrap_err().to_string();
         assert!(err.ends_with("s.json: exists"), "{err}");
-        write(&scene(), &p, true).unwrap();
+        write(&scene(), &p, Overwrite::Ours).unwrap();
         // A user's file with the sidecar's name survives, as does one with the manifest's.
         std::fs::write(p.with_extension("meshes"), b"my notes").unwrap();
-        let err = write(&scene(), &p, true).unwrap_err().to_string();
+        let err = write(&scene(), &p, Overwrite::Ours).unwrap_err().to_string();
         assert!(err.contains("s.meshes") && err.contains("refusing"), "{err}");
         assert_eq!(std::fs::read(p.with_extension("meshes")).unwrap(), b"my notes");
         let q = dir.path().join("mine.json");
         std::fs::write(&q, b"{\"format\": \"not hdov\"}").unwrap();
-        assert!(write(&scene(), &q, true).unwrap_err().to_string().contains("refusing"));
+        assert!(write(&scene(), &q, Overwrite::Ours).unwrap_err().to_string().contains("refusing"));
         assert_eq!(std::fs::read(&q).unwrap(), b"{\"format\": \"not hdov\"}");
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names.len(), 3, "no temporary files left: {names:?}");
@@ -225,7 +226,7 @@ mod tests {
     fn corrupted_or_truncated_geometry_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("s.json");
-        write(&scene(), &p, false).unwrap();
+        write(&scene(), &p, Overwrite::Never).unwrap();
         let mp = p.with_extension("meshes");
         let good = std::fs::read(&mp).unwrap();
         let mut flipped = good.clone();

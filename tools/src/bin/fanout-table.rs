@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use hdov::Overwrite;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::BackendKind;
 use hdov::progress::Progress;
@@ -52,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     visibility: Some(VisibilityParams { resolution, backend: BackendKind::Cpu, ..Default::default() }),
                     ..Default::default()
                 };
-                hdov::build(&scene, &dir, &params, true, &Progress::for_terminal(false))?;
+                hdov::build(&scene, &dir, &params, Overwrite::Ours, &Progress::for_terminal(false))?;
                 Database::open(&dir)?
             }
         };

@@ -19,6 +19,7 @@ use std::fmt::Display;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use hdov::Overwrite;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::BackendKind;
 use hdov::format::Manifest;
@@ -206,7 +207,7 @@ impl Ctx {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let path = dir.join(&name);
         let t = Instant::now();
-        hdov::build(scene, &path, params, true, &self.progress).map_err(err)?;
+        hdov::build(scene, &path, params, Overwrite::Ours, &self.progress).map_err(err)?;
         eprintln!("built {} in {:.1} s", path.display(), t.elapsed().as_secs_f64());
         Database::open(&path).map_err(err)
     }

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
+use hdov::Overwrite;
 use hdov::city::{CityParams, CityScale, avenue_walk};
 use hdov::dov::BackendKind;
 use hdov::progress::Progress;
@@ -111,7 +112,7 @@ pub fn open_or_build(scale: CityScale) -> Result<Database, Box<dyn std::error::E
     if let Some(parent) = dir.parent() {
         std::fs::create_dir_all(parent)?;
     }
-    hdov::build(&scene, &dir, &wanted, true, &Progress::hidden())?;
+    hdov::build(&scene, &dir, &wanted, Overwrite::Ours, &Progress::hidden())?;
     eprintln!("{}: built in {:.1} s", dir.display(), t.elapsed().as_secs_f64());
     Ok(Database::open(&dir)?)
 }
