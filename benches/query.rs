@@ -52,9 +52,14 @@ fn walk(c: &mut Criterion, db: &Database, scale: CityScale) {
     };
     let mut group = c.benchmark_group(format!("{}/walk", prefix(scale)));
     group.sample_size(50).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2));
-    for (name, pair, flips) in
-        [("step-no-flip", common::same_cell_pair(db), false), ("step-flip", common::neighbour_pair(db), true)]
-    {
+    // With a resident budget of one byte every flip evicts all the geometry the new cell does
+    // not need (least recently used first) before loading what it does.
+    let evicting = SessionParams { resident_bytes: Some(1), ..params };
+    for (name, pair, flips, params) in [
+        ("step-no-flip", common::same_cell_pair(db), false, params),
+        ("step-flip", common::neighbour_pair(db), true, params),
+        ("step-flip-evicting", common::neighbour_pair(db), true, evicting),
+    ] {
         let mut session = db.session(&params).unwrap();
         // The first steps load the cells' geometry; afterwards only the step itself is measured.
         session.step(pair[0], Some(Vec3::X)).unwrap();

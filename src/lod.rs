@@ -9,13 +9,13 @@
 //! parent's finest LOD has fewer faces than the sum of its children's coarsest.
 //! Every level keeps the simplifier's absolute error (in the mesh's units).
 
-use indicatif::ProgressBar;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use crate::format::params::LodParams;
 use crate::geom::max_scale;
+use crate::progress::Report;
 use crate::rtree::RTree;
 use crate::scene::{Mesh, Scene};
 
@@ -47,13 +47,13 @@ pub struct SceneLods {
 }
 
 /// Builds every leaf and internal LOD. `progress` advances by one per base mesh and per node.
-pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progress: &ProgressBar) -> SceneLods {
+pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progress: &dyn Report) -> SceneLods {
     let leaf: Vec<Vec<LodLevel>> = scene
         .meshes
         .par_iter()
         .map(|m| {
             let chain = leaf_chain(&m.mesh, params);
-            progress.inc(1);
+            progress.advance(1);
             chain
         })
         .collect();
@@ -87,7 +87,7 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
                 for level in &mut chain {
                     level.error += inherited;
                 }
-                progress.inc(1);
+                progress.advance(1);
                 (id, chain)
             })
             .collect();
@@ -290,7 +290,7 @@ mod tests {
             grid: None,
         };
         let tree = RTree::build(&scene.all_object_bounds(), 4, crate::rtree::TreeAlgorithm::Str);
-        let lods = build_scene_lods(&scene, &tree, &LodParams::default(), &ProgressBar::hidden());
+        let lods = build_scene_lods(&scene, &tree, &LodParams::default(), &crate::progress::Quiet);
         assert_eq!(lods.leaf.len(), 1, "instanced geometry is simplified once");
         for (id, node) in tree.nodes.iter().enumerate() {
             let children: usize = node

@@ -1,4 +1,6 @@
-//! Progress bars for long steps: shown on a terminal, silent otherwise (scripts, CI, `--json`).
+//! Progress of long work, reported one way: every stage takes a [`Report`] (how far its step
+//! got). [`Progress`] makes them: bars on a terminal, silent otherwise (scripts, CI, `--json`);
+//! [`Quiet`] reports nowhere.
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -34,4 +36,33 @@ impl Progress {
         bar.set_message(label.to_string());
         bar
     }
+}
+
+/// How far one step of long work got: the one way the stages (LODs, sample points) report it.
+/// An indicatif `ProgressBar` is one; [`Quiet`] is the one that reports nowhere.
+pub trait Report: Sync {
+    /// `n` more units are done.
+    fn advance(&self, n: u64);
+    /// `done` of `total` units are done (the total may grow as work is found).
+    fn set(&self, done: u64, total: u64);
+}
+
+impl Report for ProgressBar {
+    fn advance(&self, n: u64) {
+        self.inc(n);
+    }
+
+    fn set(&self, done: u64, total: u64) {
+        self.set_length(total);
+        self.set_position(done);
+    }
+}
+
+/// Reports nowhere.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Quiet;
+
+impl Report for Quiet {
+    fn advance(&self, _: u64) {}
+    fn set(&self, _: u64, _: u64) {}
 }

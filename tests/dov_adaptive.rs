@@ -77,7 +77,8 @@ fn finds_what_dense_sampling_finds(
     let mut backend = CpuBackend::new(&scene, R).unwrap();
     let texel = backend.cube_map().texel_floor();
     let truth = dense_cells(&mut backend, grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
-    let got = precompute_shard(&mut backend, grid, &bounds, &shape, options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let got =
+        precompute_shard(&mut backend, grid, &bounds, &shape, options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     for (t, (cell, g)) in truth.iter().zip(&got.cells) {
         for &(object, dov) in &t.objects {
             if f64::from(dov) >= tolerance * texel {
@@ -133,7 +134,7 @@ fn adaptive_build_counts_and_keeps_the_corner_dov() {
     let sampling = AdaptiveSampling::new(2, 6).unwrap();
     let adaptive = PrecomputeOptions { adaptive: Some(sampling), ..corners_only.clone() };
     let run = |b: &mut dyn DovBackend, o: &PrecomputeOptions| {
-        precompute_shard(b, &grid, &bounds, &shape, o, Shard::ALL, &mut |_, _| {}).unwrap()
+        precompute_shard(b, &grid, &bounds, &shape, o, Shard::ALL, &hdov::progress::Quiet).unwrap()
     };
     let base = run(&mut backend, &corners_only);
     let more = run(&mut backend, &adaptive);

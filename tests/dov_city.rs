@@ -20,7 +20,7 @@ fn run(backend: &mut dyn DovBackend, scene: &hdov::scene::Scene, shape: &TreeSha
         shape,
         &opts,
         Shard { index: 1, count: 3 },
-        &mut |_, _| {},
+        &hdov::progress::Quiet,
     )
     .unwrap()
     .cells

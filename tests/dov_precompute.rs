@@ -56,18 +56,11 @@ fn shared_corners_are_measured_once() {
     let (scene, shape) = street();
     let grid = street_grid();
     let mut backend = Counting { inner: CpuBackend::new(&scene, 16).unwrap(), points: Vec::new() };
-    let mut calls = Vec::new();
+    let calls = Calls::default();
     let bounds = scene.all_object_bounds();
-    let out = precompute_shard(
-        &mut backend,
-        &grid,
-        &bounds,
-        &shape,
-        &PrecomputeOptions::default(),
-        Shard::ALL,
-        &mut |done, total| calls.push((done, total)),
-    )
-    .unwrap();
+    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &PrecomputeOptions::default(), Shard::ALL, &calls)
+        .unwrap();
+    let calls = calls.0.into_inner().unwrap();
     assert_eq!(grid.corner_count(), 5 * 2 * 3);
     assert_eq!(backend.points.len(), grid.corner_count(), "each corner measured exactly once");
     let mut distinct = backend.points.clone();
@@ -81,7 +74,8 @@ fn shared_corners_are_measured_once() {
     // With K interior points: K more per cell, corners still once.
     backend.points.clear();
     let options = PrecomputeOptions { interior_samples: 3, ..Default::default() };
-    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let out =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     assert_eq!(backend.points.len(), 30 + 3 * 8);
     assert_eq!(out.points_measured, 30 + 3 * 8);
 }
@@ -93,12 +87,14 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
     let bounds = scene.all_object_bounds();
     let options = PrecomputeOptions::default();
     let mut backend = CpuBackend::new(&scene, 16).unwrap();
-    let whole = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let whole =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     let mut merged: Vec<(u32, CellDov)> = Vec::new();
     let mut measured = 0;
     for i in 0..3 {
         let shard = format!("{i}/3").parse::<Shard>().unwrap();
-        let part = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, shard, &mut |_, _| {}).unwrap();
+        let part =
+            precompute_shard(&mut backend, &grid, &bounds, &shape, &options, shard, &hdov::progress::Quiet).unwrap();
         measured += part.points_measured;
         merged.extend(part.cells);
     }
@@ -111,9 +107,10 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
     let mut measured = 0;
     for i in 0..3 {
         let shard = Shard { index: i, count: 3 };
-        measured += precompute_shard(&mut backend, &grid, &bounds, &shape, &corners_only, shard, &mut |_, _| {})
-            .unwrap()
-            .points_measured;
+        measured +=
+            precompute_shard(&mut backend, &grid, &bounds, &shape, &corners_only, shard, &hdov::progress::Quiet)
+                .unwrap()
+                .points_measured;
     }
     assert!(measured < 8 * grid.cell_count(), "shards without the neighbour test measure {measured} corners");
     assert!("3/3".parse::<Shard>().is_err() && "1-3".parse::<Shard>().is_err() && "0/0".parse::<Shard>().is_err());
@@ -155,7 +152,7 @@ fn cell_dovs_from_a_real_scene_are_consistent() {
         &shape,
         &PrecomputeOptions::default(),
         Shard::ALL,
-        &mut |_, _| {},
+        &hdov::progress::Quiet,
     )
     .unwrap();
     for (id, cell) in &out.cells {
@@ -197,12 +194,14 @@ fn visible_zero_dov_object_gets_the_one_texel_floor() {
     assert!(backend.measure(Vec3::ZERO).unwrap().get(target) > 0.0, "the axis point sees the target");
 
     let no_floor = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
-    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &no_floor, Shard::ALL, &mut |_, _| {}).unwrap();
+    let out =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &no_floor, Shard::ALL, &hdov::progress::Quiet).unwrap();
     assert_eq!(out.cells[0].1.object(target), 0.0, "a corner sees the target: the test scene is wrong");
 
     // The target's box is 1 unit from the cell: a margin of 1.5 reaches it.
     let floor = PrecomputeOptions { zero_dov_tests: vec![FloorTest::BoxWithin(1.5)], ..Default::default() };
-    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &floor, Shard::ALL, &mut |_, _| {}).unwrap();
+    let out =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &floor, Shard::ALL, &hdov::progress::Quiet).unwrap();
     let cell = &out.cells[0].1;
     let want = backend.cube_map().texel_floor() as f32;
     assert_eq!(cell.object(target), want);
@@ -239,7 +238,7 @@ fn neighbour_corner_floor_test() {
     let mut backend = CpuBackend::new(&scene, 64).unwrap();
     let run = |tests: Vec<FloorTest>, backend: &mut CpuBackend| {
         let options = PrecomputeOptions { zero_dov_tests: tests, ..Default::default() };
-        precompute_shard(backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap()
+        precompute_shard(backend, &grid, &bounds, &shape, &options, Shard::ALL, &hdov::progress::Quiet).unwrap()
     };
     let lower = grid.cell_id([0, 0, 0]);
     let upper = grid.cell_id([0, 1, 0]);
@@ -263,12 +262,25 @@ fn points_inside_geometry_are_skipped() {
     let bounds = scene.all_object_bounds();
     let mut backend = CpuBackend::new(&scene, 32).unwrap();
     let options = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
-    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &mut |_, _| {}).unwrap();
+    let out =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     let cell = &out.cells[0].1;
     assert_eq!(cell.skipped_points, 1);
     // From the other corners the small box covers far less than the near-1 it covers from inside.
     assert!(cell.object(0) < 0.3, "box DoV {} comes from the inside corner", cell.object(0));
     let keep = PrecomputeOptions { skip_inside_points: false, ..options };
-    let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &keep, Shard::ALL, &mut |_, _| {}).unwrap();
+    let out =
+        precompute_shard(&mut backend, &grid, &bounds, &shape, &keep, Shard::ALL, &hdov::progress::Quiet).unwrap();
     assert!(out.cells[0].1.object(0) > 0.9);
+}
+
+/// Records every progress report, as `(done, total)`.
+#[derive(Default)]
+struct Calls(std::sync::Mutex<Vec<(usize, usize)>>);
+
+impl hdov::progress::Report for Calls {
+    fn advance(&self, _: u64) {}
+    fn set(&self, done: u64, total: u64) {
+        self.0.lock().unwrap().push((done as usize, total as usize));
+    }
 }

@@ -42,7 +42,7 @@ fn fixture() -> Fixture {
         &shape,
         &PrecomputeOptions::default(),
         Shard::ALL,
-        &mut |_, _| {},
+        &hdov::progress::Quiet,
     )
     .unwrap();
     let expected = hdov::build::vpages::vdata_from_cells(&tree, grid.cell_count() as u32, &dov.cells);

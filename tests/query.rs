@@ -412,6 +412,59 @@ fn a_walk_loads_each_lod_once_and_its_deltas_add_up() {
     }
 }
 
+/// Resident geometry is evicted least recently needed first, ties (records a flip needed
+/// together) by offset, and only while over the budget: checked against a model of that rule
+/// along a walk that re-enters cells, at budgets that evict a little, a lot, or everything.
+#[test]
+fn eviction_follows_the_least_recently_needed_rule() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = city(&tmp.path().join("db"));
+    let mut path: Vec<Vec3> =
+        (0..40).map(|i| Vec3::new(-2.0 + 2.4 * i as f32, 1.7, 17.0 + (i % 7) as f32 * 9.0)).collect();
+    path.extend(path.clone().into_iter().rev());
+    // Budgets below what the whole walk keeps resident without one.
+    let mut unbounded = db.session(&SessionParams::default()).unwrap();
+    let all = path.iter().map(|&at| unbounded.step(at, None).unwrap().resident_bytes).max().unwrap();
+    for budget in [all * 3 / 4, all / 2, all / 5, 1] {
+        let mut s = db.session(&SessionParams { resident_bytes: Some(budget), ..Default::default() }).unwrap();
+        // offset → (last flip that needed it, bytes)
+        let mut model: std::collections::BTreeMap<u64, (usize, u64)> = Default::default();
+        let mut evictions = 0;
+        for (k, &at) in path.iter().enumerate() {
+            let step = s.step(at, None).unwrap();
+            if !step.flipped {
+                continue;
+            }
+            let needed: BTreeSet<(u64, u64)> =
+                s.answer().unwrap().items.iter().map(|i| (i.lod_ref.offset, u64::from(i.lod_ref.len))).collect();
+            let incoming: u64 = needed.iter().filter(|(o, _)| !model.contains_key(o)).map(|(_, n)| n).sum();
+            for &(o, _) in &needed {
+                if let Some(e) = model.get_mut(&o) {
+                    e.0 = k;
+                }
+            }
+            let mut spare: Vec<(usize, u64)> =
+                model.iter().filter(|(o, _)| !needed.iter().any(|n| n.0 == **o)).map(|(&o, &(t, _))| (t, o)).collect();
+            spare.sort_unstable();
+            let mut resident: u64 = model.values().map(|e| e.1).sum();
+            for (_, o) in spare {
+                if resident + incoming <= budget {
+                    break;
+                }
+                resident -= model.remove(&o).unwrap().1;
+                evictions += 1;
+            }
+            for &(o, n) in &needed {
+                model.entry(o).or_insert((k, n));
+            }
+            let got: BTreeSet<u64> = s.resident().map(|(o, _)| o).collect();
+            let want: BTreeSet<u64> = model.keys().copied().collect();
+            assert_eq!(got, want, "budget {budget}, step {k}");
+        }
+        assert!(evictions > 0, "budget {budget} evicts something");
+    }
+}
+
 #[test]
 fn a_session_refuses_a_step_outside_the_grid_and_goes_on() {
     let tmp = tempfile::tempdir().unwrap();

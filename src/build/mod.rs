@@ -255,10 +255,7 @@ fn build_visibility(
         &shape,
         &options,
         v.shard(),
-        &mut |done, total| {
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
-        },
+        &bar,
     )?;
     bar.finish_and_clear();
     let data = vpages::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);

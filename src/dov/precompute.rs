@@ -26,6 +26,7 @@ use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
+use crate::progress::Report;
 
 /// The shape of the object tree, as far as DoV aggregation needs it.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -192,7 +193,7 @@ pub struct ShardDov {
 /// Every corner that a shard cell uses — its own 8, plus its neighbours' with
 /// [`FloorTest::NeighbourCorners`] — is measured exactly once and kept until the last cell that
 /// uses it is done (memory: about two layers of corners, four with the neighbour test); interior
-/// points are measured once per cell. `progress` is called with `(points done, points total)`
+/// points are measured once per cell. `progress` is set to `(points done, points total)`
 /// after each measurement (with [`PrecomputeOptions::adaptive`] the total grows as cells take
 /// more than their seeds). Costs (distinct corners + K·cells + adaptive points) backend
 /// measurements plus, per cell,
@@ -204,7 +205,7 @@ pub fn precompute_shard(
     shape: &TreeShape,
     options: &PrecomputeOptions,
     shard: Shard,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &dyn Report,
 ) -> Result<ShardDov> {
     grid.check().map_err(|r| Error::bad_param(Param::Grid, r))?;
     shape.check(object_bounds.len())?;
@@ -256,14 +257,14 @@ pub fn precompute_shard(
             if let Entry::Vacant(slot) = corner_dov.entry(corner) {
                 slot.insert(backend.measure(grid.corner_position(grid.corner_coords(corner)))?);
                 done += 1;
-                progress(done, total);
+                progress.set(done as u64, total as u64);
             }
         }
         let mut interior = Vec::with_capacity(options.interior_samples as usize);
         for p in interior_points(&cell_box, options.interior_samples) {
             interior.push(backend.measure(p)?);
             done += 1;
-            progress(done, total);
+            progress.set(done as u64, total as u64);
         }
         let own = grid.cell_corners(coords);
         if let Some(sampling) = &options.adaptive {
@@ -275,7 +276,7 @@ pub fn precompute_shard(
                 done += 1;
                 taken += 1;
                 total += usize::from(taken > planned);
-                progress(done, total);
+                progress.set(done as u64, total as u64);
             })?;
             interior.extend(extra);
         }

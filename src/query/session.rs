@@ -10,10 +10,10 @@
 //! `Database::review_session`), searches the R-tree with disk cells. Both share the delta
 //! loading, resident geometry and [`Step`]s, so walks compare 1:1.
 
-use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
+use lru::LruCache;
 use serde::{Deserialize, Serialize};
 
 use super::{Answer, Camera, Item, QueryParams};
@@ -207,12 +207,6 @@ impl CellMethod for Visual {
     }
 }
 
-/// A resident LOD record.
-struct Resident {
-    bytes: Box<[u8]>,
-    last_used: u64,
-}
-
 /// A walkthrough over one database. See the module documentation.
 pub struct Session<'db> {
     db: &'db Database,
@@ -222,8 +216,8 @@ pub struct Session<'db> {
     /// The current cell's answer, unculled: what stays resident while the viewer is in it.
     answer: Option<Answer>,
     last_at: Option<Vec3>,
-    /// By LOD record offset in `geometry.blob`.
-    resident: HashMap<u64, Resident>,
+    /// LOD records by offset in `geometry.blob`, least recently needed first.
+    resident: LruCache<u64, Box<[u8]>>,
     resident_bytes: u64,
     steps: u64,
 }
@@ -261,7 +255,7 @@ impl<'db> Session<'db> {
             method,
             answer: None,
             last_at: None,
-            resident: HashMap::new(),
+            resident: LruCache::unbounded(),
             resident_bytes: 0,
             steps: 0,
         }
@@ -284,7 +278,7 @@ impl<'db> Session<'db> {
             self.answer = Some(answer);
             self.delta_load(&mut step)?;
             let resident = &self.resident;
-            self.method.loaded(&|offset| resident.contains_key(&offset));
+            self.method.loaded(&|offset| resident.contains(&offset));
         }
         if self.params.prefetch
             && let (Some(last), Some(answer)) = (self.last_at, &self.answer)
@@ -335,48 +329,51 @@ impl<'db> Session<'db> {
 
     /// The LOD records resident now, by offset in `geometry.blob`, with their sizes.
     pub fn resident(&self) -> impl Iterator<Item = (u64, usize)> + '_ {
-        self.resident.iter().map(|(&k, r)| (k, r.bytes.len()))
+        self.resident.iter().map(|(&k, bytes)| (k, bytes.len()))
     }
 
     /// Loads what the new cell's answer needs and is not resident; evicts what it does not
-    /// need, least recently used first, while the budget would be exceeded.
+    /// need, least recently used first, while the budget would be exceeded. A cell's records
+    /// count as used in offset order, so the eviction order is (last flip that needed the
+    /// record, offset), whatever order the answer lists them in.
     fn delta_load(&mut self, step: &mut Step) -> Result<()> {
         let answer = self.answer.as_ref().expect("a flip sets the answer");
         let mut needed: Vec<(u64, LodRef)> = answer.items.iter().map(|i| (i.lod_ref.offset, i.lod_ref)).collect();
         needed.sort_unstable_by_key(|n| n.0);
         needed.dedup_by_key(|n| n.0);
         let is_needed = |k: &u64| needed.binary_search_by_key(k, |n| n.0).is_ok();
+        // The needed records become the most recent, so the least recent ones are spare.
         for (k, _) in &needed {
-            if let Some(r) = self.resident.get_mut(k) {
-                r.last_used = self.steps;
-            }
+            self.resident.promote(k);
         }
         let incoming: u64 =
-            needed.iter().filter(|(k, _)| !self.resident.contains_key(k)).map(|(_, l)| u64::from(l.len)).sum();
+            needed.iter().filter(|(k, _)| !self.resident.contains(k)).map(|(_, l)| u64::from(l.len)).sum();
         if let Some(budget) = self.params.resident_bytes {
-            let mut spare: Vec<(u64, u64)> =
-                self.resident.iter().filter(|(k, _)| !is_needed(k)).map(|(&k, r)| (r.last_used, k)).collect();
-            spare.sort_unstable();
-            for (_, k) in spare {
-                if self.resident_bytes + incoming <= budget {
-                    break;
+            while self.resident_bytes + incoming > budget {
+                match self.resident.peek_lru() {
+                    Some((k, _)) if !is_needed(k) => {
+                        let (_, bytes) = self.resident.pop_lru().expect("peeked");
+                        self.resident_bytes -= bytes.len() as u64;
+                        step.evicted += 1;
+                        step.evicted_bytes += bytes.len() as u64;
+                    }
+                    _ => break, // only needed records are left
                 }
-                let r = self.resident.remove(&k).expect("listed as resident");
-                self.resident_bytes -= r.bytes.len() as u64;
-                step.evicted += 1;
-                step.evicted_bytes += r.bytes.len() as u64;
             }
             step.over_budget = self.resident_bytes + incoming > budget;
         }
-        for (k, lod) in needed {
-            if self.resident.contains_key(&k) {
+        for &(k, lod) in &needed {
+            if self.resident.contains(&k) {
                 continue;
             }
             let bytes: Box<[u8]> = self.db.lod_bytes(&lod)?.into();
             step.loaded += 1;
             step.loaded_bytes += bytes.len() as u64;
             self.resident_bytes += bytes.len() as u64;
-            self.resident.insert(k, Resident { bytes, last_used: self.steps });
+            self.resident.put(k, bytes);
+        }
+        for (k, _) in &needed {
+            self.resident.promote(k);
         }
         Ok(())
     }

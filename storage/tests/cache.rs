@@ -592,3 +592,26 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// LRU through the `lru` crate's list evicts exactly what the ranked structure does when every
+    /// page has one priority (the DoV policy then orders by last access alone): the same hits,
+    /// the same pages resident after every request, with page and byte limits.
+    #[test]
+    fn lru_crate_list_equals_the_ranked_lru(
+        requests in prop::collection::vec(0u64..40, 1..400),
+        pages in 1usize..12,
+        bytes in prop::option::of(64u64..600),
+    ) {
+        let limits = CacheLimits { pages: Some(pages), bytes };
+        let mut lru = PageCache::with_kind(limits, PolicyKind::Lru);
+        let mut ranked = PageCache::with_kind(limits, PolicyKind::Dov);
+        for p in requests {
+            // Pages of many sizes, so that the byte limit evicts too; one page, one size.
+            let len = 1 + (p as usize * 13) % 64;
+            prop_assert_eq!(request_len(&mut lru, p, 0.5, len), request_len(&mut ranked, p, 0.5, len));
+            prop_assert_eq!(resident(&lru, 0..40), resident(&ranked, 0..40));
+        }
+        prop_assert_eq!(lru.stats(), ranked.stats());
+    }
+}

@@ -24,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
     let run = |b: &mut dyn DovBackend| -> hdov::Result<Vec<(u32, CellDov)>> {
         let opts = PrecomputeOptions::default();
-        Ok(precompute_shard(b, &grid, &scene.all_object_bounds(), &shape, &opts, shard, &mut |_, _| {})?.cells)
+        Ok(precompute_shard(b, &grid, &scene.all_object_bounds(), &shape, &opts, shard, &hdov::progress::Quiet)?.cells)
     };
     let cpu = run(&mut CpuBackend::new(&scene, r)?)?;
     let options =

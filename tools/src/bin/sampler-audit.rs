@@ -233,7 +233,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // The whole grid, as a build measures it (corners shared by all their cells), unless
         // `@shard`; compared on the truth's cells.
         let run_on = if on_shard { shard } else { Shard::ALL };
-        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, run_on, &mut |_, _| {})?;
+        let out = precompute_shard(&mut backend, &grid, &bounds, &shape, &options, run_on, &hdov::progress::Quiet)?;
         let all_cells = out.cells.len() as f64;
         let secs = t.elapsed().as_secs_f64();
         let cpu = (hdov_tools::process_cpu_time() - cpu).as_secs_f64();
