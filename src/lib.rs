@@ -72,14 +72,16 @@ pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Param, Result};
 pub use format::Manifest;
 pub use format::params::{
-    AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, LodParams,
-    RayProbing, Sampling, Shard, VisibilityParams,
+    AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,
+    LodParams, RayProbing, Sampling, Shard, VisibilityParams,
 };
 pub use geom::Aabb;
 pub use grid::ViewGrid;
 pub use hdov_storage::{CacheLimits, DovCodec, Error as StorageError, LayoutKind, PolicyKind};
 pub use overwrite::Overwrite;
 pub use progress::Progress;
-pub use query::{Answer, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step};
+pub use query::{
+    Answer, DEFAULT_ETA, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step,
+};
 pub use rtree::TreeAlgorithm;
 pub use scene::{Mesh, Scene};

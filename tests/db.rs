@@ -154,10 +154,21 @@ fn damaged_files_are_refused_with_a_clear_error() {
             Box::new(|b| {
                 *b = String::from_utf8(b.clone())
                     .unwrap()
-                    .replace("\"format_version\": 2", "\"format_version\": 9")
+                    .replace("\"format_version\": 3", "\"format_version\": 9")
                     .into_bytes()
             }),
             "version 9",
+        ),
+        (
+            // A database of the previous format (before internal LODs by geometric error).
+            "manifest.json",
+            Box::new(|b| {
+                *b = String::from_utf8(b.clone())
+                    .unwrap()
+                    .replace("\"format_version\": 3", "\"format_version\": 2")
+                    .into_bytes()
+            }),
+            "rebuild it",
         ),
         ("manifest.json", Box::new(|b| b.truncate(b.len() / 2)), "manifest"),
         (

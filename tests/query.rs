@@ -146,7 +146,17 @@ fn the_screen_error_rule_picks_the_coarsest_level_within_its_pixels() {
                 let cell = db.grid().unwrap().cell_box(a.cell);
                 for i in &a.items {
                     let gap = (i.mbr.min - cell.max).max(cell.min - i.mbr.max).max(Vec3::ZERO).length();
-                    let within = |lod: usize| world_error(&db, i, lod) * per_unit <= pixels * f64::from(gap);
+                    // What is barely visible (DoV ≤ η) is held to the bound relaxed by visibility,
+                    // B(μ)·error ≤ pixels, μ from the cell's corner farthest from the item.
+                    let bound = if f64::from(i.dov) <= eta {
+                        let c = i.mbr.center();
+                        let far = Vec3::select((c - cell.min).cmpgt(cell.max - c), cell.min, cell.max);
+                        pixels / hdov::query::visibility_bias(f64::from(i.dov), far, &i.mbr).max(f64::MIN_POSITIVE)
+                    } else {
+                        pixels
+                    };
+                    let within =
+                        |lod: usize| world_error(&db, i, lod) * per_unit <= bound * f64::from(gap) * (1.0 + 1e-6);
                     let lod = i.lod as usize;
                     let levels = match i.kind {
                         ItemKind::Object => db.catalog().object_lods(i.id).len(),
@@ -418,15 +428,20 @@ fn a_walk_loads_each_lod_once_and_its_deltas_add_up() {
 #[test]
 fn eviction_follows_the_least_recently_needed_rule() {
     let tmp = tempfile::tempdir().unwrap();
-    let db = city(&tmp.path().join("db"));
+    // A town: every box its own base mesh, so an answer needs many records.
+    let mut scene = hdov_testkit::scenes::town(5, 4);
+    scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
+    let db = build(&scene, &tmp.path().join("db"), 4);
     let mut path: Vec<Vec3> =
         (0..40).map(|i| Vec3::new(-2.0 + 2.4 * i as f32, 1.7, 17.0 + (i % 7) as f32 * 9.0)).collect();
     path.extend(path.clone().into_iter().rev());
-    // Budgets below what the whole walk keeps resident without one.
-    let mut unbounded = db.session(&SessionParams::default()).unwrap();
+    // Every visible object at its own level (η = 0): many records to keep or evict. Budgets
+    // below what the whole walk keeps resident without one.
+    let query = QueryParams { eta: 0.0, ..Default::default() };
+    let mut unbounded = db.session(&SessionParams { query, ..Default::default() }).unwrap();
     let all = path.iter().map(|&at| unbounded.step(at, None).unwrap().resident_bytes).max().unwrap();
     for budget in [all * 3 / 4, all / 2, all / 5, 1] {
-        let mut s = db.session(&SessionParams { resident_bytes: Some(budget), ..Default::default() }).unwrap();
+        let mut s = db.session(&SessionParams { query, resident_bytes: Some(budget), ..Default::default() }).unwrap();
         // offset → (last flip that needed it, bytes)
         let mut model: std::collections::BTreeMap<u64, (usize, u64)> = Default::default();
         let mut evictions = 0;

@@ -106,6 +106,7 @@ pub fn build(
             })
             .collect()
     };
+    let ladder = crate::lod::hlod::ErrorLadder::for_diagonal(scene.bounds().extent().length());
     let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     geometry.finish()?;
@@ -138,6 +139,8 @@ pub fn build(
             .collect(),
         mesh_names: scene.meshes.iter().map(|m| m.name.clone()).collect(),
         node_shapes: node_shapes(&tree, scene, &mesh_lods, &node_lods),
+        descent_faces: descent_faces(&tree, scene, &mesh_lods, &ladder.0),
+        error_ladder: ladder.0,
         mesh_lods,
         node_lods,
     };
@@ -218,6 +221,36 @@ fn node_shapes(tree: &RTree, scene: &Scene, mesh_lods: &[Vec<LodRef>], node_lods
             }
         })
         .collect()
+}
+
+/// Per node and rung of `ladder`: the faces of the objects under the node, each at its coarsest
+/// leaf level within the rung's world error (see [`Catalog::descent_faces`]).
+fn descent_faces(tree: &RTree, scene: &Scene, mesh_lods: &[Vec<LodRef>], ladder: &[f32]) -> Vec<Vec<u64>> {
+    let object = |o: u32| -> Vec<u64> {
+        let obj = &scene.objects[o as usize];
+        let (chain, scale) = (&mesh_lods[obj.mesh as usize], crate::geom::max_scale(&obj.transform));
+        ladder
+            .iter()
+            .map(|&e| {
+                let l = chain.iter().rposition(|l| l.error * scale <= e).unwrap_or(0);
+                u64::from(chain[l].faces)
+            })
+            .collect()
+    };
+    let add = |a: &mut Vec<u64>, b: &[u64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+    // Children have larger ids than their parents: one reverse sweep sums bottom-up.
+    let mut out = vec![vec![0u64; ladder.len()]; tree.nodes.len()];
+    for (id, node) in tree.nodes.iter().enumerate().rev() {
+        let mut sum = vec![0u64; ladder.len()];
+        for e in &node.entries {
+            match node.is_leaf() {
+                true => add(&mut sum, &object(e.child)),
+                false => add(&mut sum, &out[e.child as usize]),
+            }
+        }
+        out[id] = sum;
+    }
+    out
 }
 
 /// Measures DoV for the shard's cells and writes the chosen V-page layouts into `dir`.

@@ -8,8 +8,9 @@ use serde_json::json;
 use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
 use hdov::{
-    Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info, LayoutKind, Manifest,
-    Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm, ViewGrid, VisibilityParams,
+    Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info, InternalLods, LayoutKind,
+    LodParams, Manifest, Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm, ViewGrid,
+    VisibilityParams,
 };
 
 #[derive(Args)]
@@ -74,6 +75,10 @@ pub struct BuildArgs {
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
     #[arg(long, default_value = "str")]
     tree: TreeAlgorithm,
+    /// Internal (tree node) LODs: hlod (levels by geometric error) or thesis (§5.6, from the
+    /// children's coarsest levels, to reproduce the thesis's figures).
+    #[arg(long, default_value = "hlod")]
+    internal_lods: InternalLods,
     #[command(flatten)]
     visibility: VisibilityArgs,
     /// Replace an existing database (or empty directory) at --out; anything else is refused.
@@ -223,8 +228,8 @@ pub fn build(a: BuildArgs) -> Result<()> {
         page_size: a.page_size,
         fanout: a.fanout,
         tree: a.tree,
+        lod: LodParams { internal: a.internal_lods, ..Default::default() },
         visibility: a.visibility.params()?,
-        ..Default::default()
     };
     // Every argument that does not need the scene is checked before the scene is read.
     params.check(None)?;
@@ -314,6 +319,12 @@ fn print_info(path: &Path, info: &Info, m: &Manifest) {
         "  objects {} ({} base meshes), triangles {} ({} stored), LOD triangles {}",
         info.objects, info.base_meshes, info.triangles, info.stored_triangles, info.lod_triangles
     );
+    println!(
+        "  LOD bytes: leaf {}, internal {} ({:.2}× the leaf LODs)",
+        info.leaf_lod_bytes,
+        info.internal_lod_bytes,
+        info.internal_lod_bytes as f64 / info.leaf_lod_bytes.max(1) as f64
+    );
     let t = &info.tree;
     println!(
         "  tree {}: {} nodes, {} leaves, height {}, fan-out {}, fill {:.0} %",
@@ -346,7 +357,7 @@ fn print_info(path: &Path, info: &Info, m: &Manifest) {
 const DEMO_RESOLUTION: u32 = 128;
 
 /// What a demo directory holds; anything else in it makes the demo refuse the directory.
-const DEMO_FILES: [&str; 3] = ["city.json", "city.meshes", "city.hdov"];
+const DEMO_FILES: [&str; 4] = ["city.json", "city.meshes", "city.hdov", "city.png"];
 
 /// Refuses `out` unless it is missing, empty or holds nothing but an earlier demo's files
 /// (each of which is replaced only if hdov wrote it).
@@ -402,6 +413,17 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         print_build(&db_path, &report);
     }
     let asked = super::query::demo_queries(&db_path, a.json)?;
+    let picture_path = a.out.join(DEMO_FILES[3]);
+    let picture = super::render::demo_picture(&Database::open(&db_path)?, asked.2, &picture_path)?;
+    if !a.json {
+        match &picture {
+            Some(_) => println!(
+                "picture: {} (full detail | the default answer along the walk, coloured by LOD level)",
+                picture_path.display()
+            ),
+            None => println!("picture: skipped (no graphics adapter)"),
+        }
+    }
     if a.json {
         let doc = json!({
             "scene": scene_path,
@@ -409,6 +431,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             "build": report,
             "queries": asked.0,
             "walk": asked.1,
+            "picture": picture.is_some().then_some(&picture_path),
             "seconds": t.elapsed().as_secs_f64(),
         });
         println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));

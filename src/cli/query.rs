@@ -19,7 +19,7 @@ use hdov::{LayoutKind, PolicyKind};
 #[derive(Args)]
 pub(super) struct AnswerArgs {
     /// DoV threshold η (threshold mode): subtrees seen with DoV ≤ η come back as one coarse LOD.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = hdov::DEFAULT_ETA)]
     eta: f64,
     /// Query mode: threshold, naive, budget, vmsse or frustum.
     #[arg(long, default_value = "threshold")]
@@ -369,21 +369,24 @@ pub(super) fn summarise(steps: &[Step]) -> WalkSummary {
 
 /// The demo's questions to its database: point queries in every mode from one street corner,
 /// and a walk along the first avenue. Prints them unless `json`; returns them as JSON.
-pub(super) fn demo_queries(db_path: &Path, json: bool) -> Result<(serde_json::Value, serde_json::Value)> {
+/// The demo's queries from one street viewpoint and its walk; returns them as JSON, and the
+/// viewpoint with the walk's direction there.
+pub(super) fn demo_queries(db_path: &Path, json: bool) -> Result<(serde_json::Value, serde_json::Value, (Vec3, Vec3))> {
     let db = Database::open(db_path)?;
     let grid = *db.grid().ok_or_else(|| Error::bad_file(db_path, "holds no grid"))?;
     let path = hdov::city::avenue_walk(&grid, 150);
-    let at = path[path.len() / 3].0;
+    let (at, along) = path[path.len() / 3];
     let ahead = Camera { look: Vec3::X, ..Camera::default() };
     let asks = [
         ("naive", QueryParams { mode: Mode::Naive, ..Default::default() }),
         ("threshold η = 0", QueryParams { eta: 0.0, ..Default::default() }),
+        ("threshold η = 1e-4", QueryParams { eta: 1e-4, ..Default::default() }),
         ("threshold η = 1e-3", QueryParams { eta: 1e-3, ..Default::default() }),
-        ("threshold η = 8e-3", QueryParams { eta: 8e-3, ..Default::default() }),
+        ("threshold η = 4e-3", QueryParams { eta: 4e-3, ..Default::default() }),
         ("budget 20k faces", QueryParams { mode: Mode::Budget, budget: 20_000, ..Default::default() }),
         ("vmsse τ = 1 px", QueryParams { mode: Mode::Vmsse, ..Default::default() }),
         ("frustum, looking +x", QueryParams { mode: Mode::Frustum, camera: Some(ahead), ..Default::default() }),
-        ("η = 1e-3, looking +x", QueryParams { camera: Some(ahead), ..Default::default() }),
+        ("η = 4e-3, looking +x", QueryParams { camera: Some(ahead), ..Default::default() }),
     ];
     let mut queries = Vec::new();
     if !json {
@@ -409,10 +412,10 @@ pub(super) fn demo_queries(db_path: &Path, json: bool) -> Result<(serde_json::Va
     let steps = path.iter().map(|&(at, look)| session.step(at, Some(look))).collect::<Result<Vec<_>>>()?;
     let summary = summarise(&steps);
     if !json {
-        print!("walk along the first avenue, η = 1e-3, DoV-Time cache of 64 pages: ");
+        print!("walk along the first avenue, η = 4e-3, DoV-Time cache of 64 pages: ");
         print_summary(&summary);
     }
-    Ok((serde_json::Value::Array(queries), serde_json::to_value(&summary).expect("serialisable")))
+    Ok((serde_json::Value::Array(queries), serde_json::to_value(&summary).expect("serialisable"), (at, along)))
 }
 
 /// A path file: `(line number, viewpoint, view direction)` per point.

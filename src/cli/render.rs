@@ -1,7 +1,7 @@
 //! `hdov render`: draw the full-detail scene or a query's answer from a camera into a PNG, and
 //! report the answer's fidelity against full detail.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 use glam::Vec3;
@@ -133,4 +133,17 @@ pub fn render(a: RenderCmd) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The demo's picture: full detail beside the default answer from `at` looking along `look`,
+/// both coloured by LOD level, into `out` (a PNG). `None` without a graphics adapter.
+pub(super) fn demo_picture(db: &Database, (at, look): (Vec3, Vec3), out: &Path) -> Result<Option<hdov::render::Image>> {
+    let Ok(renderer) = Renderer::new() else { return Ok(None) };
+    let view = View::new(at, look, 60.0, 640, 360);
+    let answer = db.query(at, &hdov::QueryParams { camera: Some(view.camera()), ..Default::default() })?;
+    let full = renderer.render_full(db, &view, ColorMode::Lod)?;
+    let drawn = renderer.render_answer(db, &answer, &view, ColorMode::Lod)?;
+    let pair = full.beside(&drawn);
+    pair.write_png(out)?;
+    Ok(Some(pair))
 }

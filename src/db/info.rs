@@ -33,6 +33,10 @@ pub struct Info {
     pub cells: u64,
     /// Faces over all stored LOD levels (leaf and internal).
     pub lod_triangles: u64,
+    /// Bytes of `geometry.blob` holding the base meshes' leaf LOD chains (instances stored once).
+    pub leaf_lod_bytes: u64,
+    /// Bytes of `geometry.blob` holding the tree nodes' internal LOD chains.
+    pub internal_lod_bytes: u64,
     /// The viewing grid, if the database has one.
     pub grid: Option<GridInfo>,
     /// Cube-face resolution R of the DoV measurement.
@@ -113,6 +117,8 @@ impl Database {
             nodes: c.nodes,
             cells: c.cells,
             lod_triangles: c.lod_triangles,
+            leaf_lod_bytes: self.catalog().mesh_lods.iter().flatten().map(|l| u64::from(l.len)).sum(),
+            internal_lod_bytes: self.catalog().node_lods.iter().flatten().map(|l| u64::from(l.len)).sum(),
             grid: m.grid.map(|g| GridInfo { region: g.region.to_array(), dims: g.dims }),
             resolution: m.build.visibility.as_ref().map(|v| v.resolution),
             tree: m.tree.clone(),

@@ -57,9 +57,23 @@ pub struct Catalog {
     pub node_lods: Vec<Vec<LodRef>>,
     /// Per node id.
     pub node_shapes: Vec<NodeShape>,
+    /// The errors (world units) at which [`Catalog::descent_faces`] counts faces, finest first.
+    pub error_ladder: Vec<f32>,
+    /// Per node id and rung of [`Catalog::error_ladder`]: the faces of all objects under the
+    /// node, each at its coarsest leaf level whose world error is within the rung's. What
+    /// descending would draw if every object under the node were visible, at that error.
+    pub descent_faces: Vec<Vec<u64>>,
 }
 
 impl Catalog {
+    /// The faces descending into node `node` would draw at world error `error`, if every object
+    /// under it were visible: the table's rung at or below `error` (the finest rung's count below
+    /// it, which overstates).
+    pub fn descent_faces_at(&self, node: u32, error: f64) -> u64 {
+        let rung = self.error_ladder.iter().rposition(|&e| f64::from(e) <= error).unwrap_or(0);
+        self.descent_faces[node as usize].get(rung).copied().unwrap_or(0)
+    }
+
     /// The leaf LOD chain of an object.
     pub fn object_lods(&self, object: u32) -> &[LodRef] {
         &self.mesh_lods[self.objects[object as usize].mesh as usize]
@@ -83,6 +97,13 @@ impl Catalog {
                 || s.face_ratio < 0.0
         }) {
             return Err(format!("a node shape that cannot be: {s:?}"));
+        }
+        if self.descent_faces.len() != nodes
+            || self.descent_faces.iter().any(|d| d.len() != self.error_ladder.len())
+            || self.error_ladder.windows(2).any(|w| w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less))
+            || self.error_ladder.iter().any(|e| !(e.is_finite() && *e > 0.0))
+        {
+            return Err("an error ladder or descent table that does not fit the nodes".into());
         }
         if self.mesh_lods.len() != self.mesh_names.len() {
             return Err("mesh LOD chains and mesh names differ in number".into());

@@ -113,7 +113,10 @@ impl Manifest {
         if head.format_version != FORMAT_VERSION {
             return Err(Error::bad_file(
                 &path,
-                format!("database format version {}, this hdov reads version {FORMAT_VERSION}", head.format_version),
+                format!(
+                    "database format version {}, this hdov reads version {FORMAT_VERSION}: rebuild it from its scene",
+                    head.format_version
+                ),
             ));
         }
         let m: Manifest =

@@ -299,18 +299,56 @@ impl std::str::FromStr for FloorTest {
     }
 }
 
-/// How leaf LOD chains are simplified.
+/// How LOD chains are simplified.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LodParams {
-    /// Target faces of a level / faces of the level before.
+    /// Leaf chains: target faces of a level / faces of the level before.
     pub ratio: f32,
     /// A chain stops once a level has at most this many faces.
     pub min_faces: usize,
+    /// How internal (tree node) LODs are built.
+    #[serde(with = "super::by_name::one")]
+    pub internal: InternalLods,
 }
 
 impl Default for LodParams {
     fn default() -> Self {
-        Self { ratio: 0.5, min_faces: 32 }
+        Self { ratio: 0.5, min_faces: 32, internal: InternalLods::Hlod }
+    }
+}
+
+/// How a tree node's internal LOD chain is built (docs/query.md, "Internal LODs").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InternalLods {
+    /// Levels by geometric error (HLOD): level k of every node is its children's levels at error
+    /// ≤ e_k/2 merged and simplified to error ≤ e_k/2, e_k doubling per level, kept where it cuts
+    /// faces by a quarter; the recorded error is the simplifier's plus the worst part's, so a
+    /// parent's error is never below its children's. Internal bytes are bounded by the leaf
+    /// LODs' (`hlod`).
+    #[default]
+    Hlod,
+    /// The thesis's §5.6: the children's coarsest levels merged and simplified by a face ratio,
+    /// so a parent's finest level has fewer faces than its children's coarsest (`thesis`).
+    Thesis,
+}
+
+impl std::fmt::Display for InternalLods {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            InternalLods::Hlod => "hlod",
+            InternalLods::Thesis => "thesis",
+        })
+    }
+}
+
+impl std::str::FromStr for InternalLods {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "hlod" => Ok(InternalLods::Hlod),
+            "thesis" => Ok(InternalLods::Thesis),
+            _ => Err(format!("unknown internal LODs '{s}' (expected hlod or thesis)")),
+        }
     }
 }
 

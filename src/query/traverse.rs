@@ -186,6 +186,12 @@ impl Traversal<'_, '_> {
         let scale = || f64::from(max_scale(&Mat4::from_cols_array(&self.db.catalog().objects[o as usize].transform)));
         match (self.params.mode, self.params.lod_rule) {
             (Mode::Vmsse, _) => self.coarsest_within_tau(chain, d, mbr, scale()).unwrap_or(0),
+            // The η rule: what is barely visible (DoV ≤ η) is drawn within the bound relaxed by
+            // visibility, as a stopped subtree is (`stop_at`).
+            (Mode::Threshold, LodRule::ScreenError { pixels }) if d <= self.params.eta => {
+                let relaxed = self.relaxed_pixels(pixels, d, mbr);
+                self.coarsest_within_pixels(chain, mbr, scale(), relaxed).unwrap_or(0)
+            }
             (_, LodRule::ScreenError { pixels }) => {
                 self.coarsest_within_pixels(chain, mbr, scale(), pixels).unwrap_or(0)
             }
@@ -196,33 +202,51 @@ impl Traversal<'_, '_> {
 
     /// Whether to stop at child node `c` (DoV `d`, `nvo` visible objects), and at which level.
     ///
-    /// Under eq. 5.5 and vmsse the level is then made coarser until it draws no more than the
-    /// visible objects would at their coarsest (leaf LODs of barely visible objects are coarse,
-    /// which eq. 5.4's estimate from full-detail faces does not see); where no level does, the
-    /// query descends. Under the screen-error rule a coarser level would break the error bound,
-    /// so the query stops only where the level within it already fits. Either way stopping
-    /// never draws more than descending would.
+    /// Under the screen-error rule (the default) a subtree with DoV ≤ η stops at the coarsest
+    /// internal level whose error is within the bound (relaxed by visibility,
+    /// [`Traversal::relaxed_pixels`]) from the nearest point of the cell, where that level draws
+    /// no more faces than descending would: the node's `nvo` visible objects
+    /// at the levels the same bound gives them from the far side of the node (an estimate from
+    /// the catalog's descent table, no page read). Under eq. 5.5 and vmsse the level is made
+    /// coarser until it draws no more than the visible objects would at their coarsest (leaf LODs
+    /// of barely visible objects are coarse, which eq. 5.4's estimate from full-detail faces does
+    /// not see); where no level does, the query descends.
     fn stop_at(&self, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Option<usize> {
         let chain = &self.db.catalog().node_lods[c as usize];
-        let level = match self.params.mode {
-            Mode::Vmsse => self.coarsest_within_tau(chain, d, mbr, 1.0)?,
-            _ => {
+        let level = match (self.params.mode, self.params.lod_rule) {
+            (Mode::Vmsse, _) => self.coarsest_within_tau(chain, d, mbr, 1.0)?,
+            (_, LodRule::ScreenError { pixels }) => {
+                if d > self.params.eta {
+                    return None;
+                }
+                let level = self.coarsest_within_pixels(chain, mbr, 1.0, self.relaxed_pixels(pixels, d, mbr))?;
+                let shape = &self.db.catalog().node_shapes[c as usize];
+                let per_unit = self.params.camera.unwrap_or_default().pixels_per_unit();
+                let far_error = pixels * f64::from(farthest(&self.cell_box, mbr)) / per_unit;
+                let descent = u64::from(nvo) * self.db.catalog().descent_faces_at(c, far_error)
+                    / u64::from(shape.objects.max(1));
+                return (u64::from(chain[level].faces) <= descent).then_some(level);
+            }
+            (_, LodRule::Dov) => {
                 let eta = self.params.eta;
                 // Eq. 5.4: stop where the internal LOD draws fewer faces than the visible leaves.
                 if !(d <= eta && self.internal_is_cheaper(c, nvo)) {
                     return None;
                 }
-                match self.params.lod_rule {
-                    LodRule::Dov => pick(chain, d / eta), // eq. 5.5
-                    LodRule::ScreenError { pixels } => {
-                        let level = self.coarsest_within_pixels(chain, mbr, 1.0, pixels)?;
-                        return (u64::from(chain[level].faces) <= self.descent_cap(c, nvo)).then_some(level);
-                    }
-                }
+                pick(chain, d / eta) // eq. 5.5
             }
         };
         let cap = self.descent_cap(c, nvo);
         (level..chain.len()).find(|&l| u64::from(chain[l].faces) <= cap)
+    }
+
+    /// The screen-error bound `pixels` relaxed by visibility as vmsse relaxes it, B(μ)·error ≤
+    /// pixels, for something of DoV `d` in box `mbr`: μ is taken from the cell's point farthest
+    /// from the box's centre, where the box covers least of the sphere, so that the bound is the
+    /// least relaxed one over the cell (docs/query.md, "The η rule").
+    fn relaxed_pixels(&self, pixels: f64, d: f64, mbr: &Aabb) -> f64 {
+        let far = farthest_point_distance(&self.cell_box, &mbr.center());
+        pixels / bias_at_distance(d, far, mbr).max(f64::MIN_POSITIVE)
     }
 
     /// The faces node `c`'s `nvo` visible objects would draw at their coarsest leaf LODs.
@@ -332,6 +356,16 @@ impl Traversal<'_, '_> {
     }
 }
 
+/// The largest distance between a point of `a` and a point of `b`.
+fn farthest(a: &Aabb, b: &Aabb) -> f32 {
+    (a.max - b.min).abs().max((b.max - a.min).abs()).length()
+}
+
+/// The largest distance from a point of `a` to `p`.
+fn farthest_point_distance(a: &Aabb, p: &Vec3) -> f32 {
+    (a.max - *p).abs().max((*p - a.min).abs()).length()
+}
+
 /// The level picked by eq. 5.5/5.6 for interpolation weight `k`.
 fn pick(chain: &[LodRef], k: f64) -> usize {
     pick_level(chain.len(), |i| u64::from(chain[i].faces), k)
@@ -354,8 +388,13 @@ fn item(kind: ItemKind, id: u32, name: std::sync::Arc<str>, lod: usize, lod_ref:
 /// (1 inside it): the visible fraction of what could be seen. Monotone, B(0) = 0, B(1) = 1;
 /// concave, so a half-hidden node keeps 71 % of its error weight (seed 000 §4 compares curves).
 pub fn visibility_bias(dov: f64, at: Vec3, mbr: &Aabb) -> f64 {
+    bias_at_distance(dov, at.distance(mbr.center()), mbr)
+}
+
+/// [`visibility_bias`] with the box's centre `distance` away.
+fn bias_at_distance(dov: f64, distance: f32, mbr: &Aabb) -> f64 {
     let r = f64::from(mbr.extent().length()) / 2.0;
-    let dist = f64::from(at.distance(mbr.center()));
+    let dist = f64::from(distance);
     let cover = if dist <= r { 1.0 } else { (1.0 - (1.0 - (r / dist).powi(2)).sqrt()) / 2.0 };
     (dov / cover.max(f64::MIN_POSITIVE)).clamp(0.0, 1.0).sqrt()
 }

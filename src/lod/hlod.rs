@@ -1,0 +1,184 @@
+//! Internal LOD chains by geometric error (HLOD), as 3D Tiles' geometric error and cluster-DAG
+//! LOD systems keep them.
+//!
+//! Every node shares one error ladder, `e_k = e_0·2^k` ([`ErrorLadder`]). Level k of a node is
+//! the union of its children's coarsest levels with error ≤ `e_k/2` (an object's leaf level
+//! under its transform, a child node's internal level), welded and simplified with a target
+//! error of `e_k/2`: the quadric simplifier first (pruning parts smaller than the error), the
+//! sloppy one where that cuts too little. Its recorded error is the simplifier's plus the worst
+//! of the parts it merges, so it bounds the level's distance to full detail and a parent's error
+//! is never below its children's (decision 29). A level is kept only if it cuts a quarter of the
+//! faces it replaces at that error; [`trim`] then keeps the internal LODs from outweighing the
+//! leaf LODs they summarise.
+
+use super::{LodLevel, MIN_REDUCTION, simplify_to_error, weld};
+use crate::geom::max_scale;
+use crate::rtree::RTree;
+use crate::scene::{Mesh, Scene};
+
+/// A level must cut at least this share of the faces of the parts it replaces.
+pub const MIN_CUT: f32 = 0.25;
+
+/// Rungs of the ladder, finest first.
+pub const LADDER_RUNGS: usize = 20;
+
+/// The errors internal levels are built for: `e_k = e_0·2^k`, `e_0 = diagonal·2^−19`, so the
+/// rungs span a 2^19 range up to the scene's size (about 4 mm to 1 km for a 2 km city).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ErrorLadder(pub Vec<f32>);
+
+impl ErrorLadder {
+    /// The ladder of a scene whose bounding box has diagonal `diagonal` (world units).
+    pub fn for_diagonal(diagonal: f32) -> ErrorLadder {
+        let e0 = (diagonal.max(f32::MIN_POSITIVE) * (-19f32).exp2()).max(f32::MIN_POSITIVE);
+        ErrorLadder((0..LADDER_RUNGS).map(|k| e0 * (k as f32).exp2()).collect())
+    }
+}
+
+/// One part of a node: an object's leaf chain under its transform, or a child node's chain;
+/// finest first, errors in world units.
+enum Part<'a> {
+    Object { chain: &'a [LodLevel], transform: glam::Mat4, scale: f32 },
+    Node(&'a [LodLevel]),
+}
+
+impl Part<'_> {
+    /// The coarsest level with world error ≤ `error`: its mesh in world space, faces and error.
+    fn at(&self, error: f32) -> Option<(Mesh, usize, f32)> {
+        match self {
+            Part::Object { chain, transform, scale } => {
+                // Level 0 has error 0: an object always has a level.
+                let l = chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0);
+                Some((chain[l].mesh.transformed(transform), chain[l].faces(), chain[l].error * scale))
+            }
+            Part::Node(chain) => {
+                let l = chain.iter().rposition(|l| l.error <= error)?;
+                Some((chain[l].mesh.clone(), chain[l].faces(), chain[l].error))
+            }
+        }
+    }
+
+    fn faces_at(&self, error: f32) -> Option<usize> {
+        match self {
+            Part::Object { chain, scale, .. } => {
+                Some(chain[chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0)].faces())
+            }
+            Part::Node(chain) => chain.iter().rposition(|l| l.error <= error).map(|l| chain[l].faces()),
+        }
+    }
+}
+
+/// Every node's chain, finest first. `leaf` are the base meshes' leaf chains. A node without a
+/// level that cuts faces
+/// (a single box, say) gets one: its children's coarsest parts merged, simplified as far as the
+/// coarsest rung allows.
+pub fn build(
+    scene: &Scene,
+    tree: &RTree,
+    leaf: &[Vec<LodLevel>],
+    ladder: &ErrorLadder,
+    progress: &dyn crate::progress::Report,
+) -> Vec<Vec<LodLevel>> {
+    super::bottom_up(tree, progress, |id, internal| {
+                let node = &tree.nodes[id];
+                let parts: Vec<Part> = node
+                    .entries
+                    .iter()
+                    .map(|e| match node.is_leaf() {
+                        true => {
+                            let o = &scene.objects[e.child as usize];
+                            Part::Object {
+                                chain: &leaf[o.mesh as usize],
+                                transform: o.transform,
+                                scale: max_scale(&o.transform),
+                            }
+                        }
+                        false => Part::Node(&internal[e.child as usize]),
+                    })
+                    .collect();
+                node_chain(&parts, ladder)
+    })
+}
+
+/// One node's chain from its parts (see the module documentation).
+fn node_chain(parts: &[Part], ladder: &ErrorLadder) -> Vec<LodLevel> {
+    let mut coarse_first: Vec<LodLevel> = Vec::new();
+    for &e in ladder.0.iter().rev() {
+        let half = e / 2.0;
+        let Some(replaced) = parts.iter().map(|p| p.faces_at(half)).sum::<Option<usize>>() else { continue };
+        if replaced < 4 {
+            continue;
+        }
+        if coarse_first.last().is_some_and(|l| replaced as f32 * (1.0 - MIN_CUT) <= l.faces() as f32) {
+            // The parts at this error are no more than the coarser level already kept: a finer
+            // level would not have fewer faces than it.
+            continue;
+        }
+        let picked: Vec<(Mesh, usize, f32)> = parts.iter().filter_map(|p| p.at(half)).collect();
+        let inherited = picked.iter().map(|p| p.2).fold(0.0, f32::max);
+        let merged = weld(&Mesh::merged(&picked.into_iter().map(|p| p.0).collect::<Vec<_>>()));
+        let Some(mut level) = simplify_to_error(&merged, half, (replaced as f32 * (1.0 - MIN_CUT)) as usize) else {
+            continue;
+        };
+        if level.faces() as f32 > replaced as f32 * (1.0 - MIN_CUT) {
+            continue;
+        }
+        level.error += inherited;
+        // A finer level with no more faces than a coarser one makes the coarser one useless.
+        while coarse_first.last().is_some_and(|l| l.faces() as f32 >= level.faces() as f32 * (1.0 - MIN_REDUCTION)) {
+            coarse_first.pop();
+        }
+        coarse_first.push(level);
+    }
+    if coarse_first.is_empty() {
+        coarse_first.push(fallback(parts, ladder));
+    }
+    coarse_first.reverse();
+    coarse_first
+}
+
+/// Drops finest levels until all chains together hold at most `bytes` bytes of mesh data
+/// ([`mesh_bytes`]): those of the highest nodes first (the root's finest level is the one a query
+/// is least likely to stop at, since a node's DoV only grows towards the root), the biggest first
+/// among equals. Every node keeps its coarsest level.
+pub fn trim(internal: &mut [Vec<LodLevel>], tree: &RTree, bytes: usize) {
+    let mut total: usize = internal.iter().flatten().map(mesh_bytes).sum();
+    while total > bytes {
+        let Some(id) = (0..internal.len())
+            .filter(|&i| internal[i].len() > 1)
+            .max_by_key(|&i| (tree.nodes[i].level, internal[i][0].faces()))
+        else {
+            break;
+        };
+        total -= mesh_bytes(&internal[id].remove(0));
+    }
+}
+
+/// The bytes a level's mesh record takes in `geometry.blob`: 12 per position, and each index as
+/// bincode's variable-length integer (1 byte below 251, 3 below 2^16, 5 above), which is what
+/// makes a big merged mesh weigh more per face than a small one.
+pub fn mesh_bytes(level: &LodLevel) -> usize {
+    let index = |i: &u32| match *i {
+        0..251 => 1,
+        251..65_536 => 3,
+        _ => 5,
+    };
+    level.mesh.positions.len() * 12 + level.mesh.indices.iter().map(index).sum::<usize>()
+}
+
+/// The one level of a node no rung could cut: its parts at their coarsest, merged as they are.
+fn fallback(parts: &[Part], ladder: &ErrorLadder) -> LodLevel {
+    let top = *ladder.0.last().expect("a ladder has rungs");
+    let picked: Vec<(Mesh, usize, f32)> = parts
+        .iter()
+        .map(|p| match p {
+            Part::Node(chain) => {
+                let l = chain.last().expect("children are built first");
+                (l.mesh.clone(), l.faces(), l.error)
+            }
+            object => object.at(top).expect("objects always have a level"),
+        })
+        .collect();
+    let error = picked.iter().map(|p| p.2).fold(0.0, f32::max);
+    LodLevel { mesh: weld(&Mesh::merged(&picked.into_iter().map(|p| p.0).collect::<Vec<_>>())), error }
+}

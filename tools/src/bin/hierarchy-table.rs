@@ -1,0 +1,104 @@
+//! What the hierarchy buys at street level: the default query (and others) against the naive
+//! answer at the same LOD rule and cameras, over 24 views of a database's grid (12 viewpoints
+//! along the first avenue, each looking along the walk and to its left), with PSNR of the mean
+//! squared error over the views against full detail (issue 18's protocol).
+//!
+//! `cargo run --release -p hdov-tools --bin hierarchy-table -- DB [WIDTHxHEIGHT]`
+//!
+//! Prints one Markdown table: pages, faces and items (draw calls) as shares of naive's, the
+//! internal LODs returned, and PSNR. Needs a wgpu adapter for the PSNR column (Mesa's CPU
+//! drivers do).
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+use hdov::render::{ColorMode, Renderer, View, fidelity};
+use hdov::{Database, ItemKind, LodRule, Mode, QueryParams};
+use hdov_tools::experiments::sequence_psnr;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let db_path = PathBuf::from(args.next().ok_or("usage: hierarchy-table DB [WIDTHxHEIGHT]")?);
+    let (w, h) = match args.next() {
+        Some(s) => {
+            let (a, b) = s.split_once('x').ok_or("size: WIDTHxHEIGHT")?;
+            (a.parse()?, b.parse()?)
+        }
+        None => (640, 360),
+    };
+    let db = Database::open(&db_path)?;
+    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let views: Vec<View> = hdov::city::avenue_walk(&grid, 12)
+        .into_iter()
+        .flat_map(|(at, look)| {
+            let left = Vec3::Y.cross(look).normalize_or(look);
+            [View::new(at, look, 60.0, w, h), View::new(at, left, 60.0, w, h)]
+        })
+        .collect();
+    let renderer = Renderer::new().ok();
+    let full: Vec<_> = match &renderer {
+        Some(r) => views.iter().map(|v| r.render_full(&db, v, ColorMode::Shaded)).collect::<hdov::Result<_>>()?,
+        None => Vec::new(),
+    };
+    let configs: Vec<(String, QueryParams)> = {
+        let mut c = Vec::new();
+        for eta in [0.0, 1e-4, 1e-3, 4e-3, 1e-2] {
+            c.push((format!("default, η = {eta:e}"), QueryParams { eta, ..Default::default() }));
+        }
+        for eta in [1e-3, 8e-3] {
+            let p = QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() };
+            c.push((format!("`--lod-rule dov`, η = {eta:e}"), p));
+        }
+        c.push(("`--mode vmsse --tau 1`".into(), QueryParams { mode: Mode::Vmsse, tau: 1.0, ..Default::default() }));
+        c.push((
+            "`--lod-rule screen:2`, η = 8e-3".into(),
+            QueryParams { eta: 8e-3, lod_rule: LodRule::ScreenError { pixels: 2.0 }, ..Default::default() },
+        ));
+        c
+    };
+    println!("{} views of {w}×{h}, 60° vertical field of view; {}", views.len(), db_path.display());
+    println!();
+    println!("| query | pages / naive | faces / naive | items / naive | internal LODs | PSNR |");
+    println!("|---|---|---|---|---|---|");
+    for (name, base) in &configs {
+        let (mut sums, mut naive_sums, mut nodes, mut psnrs) = ([0u64; 3], [0u64; 3], 0usize, Vec::new());
+        for (i, v) in views.iter().enumerate() {
+            let p = QueryParams { camera: Some(v.camera()), ..*base };
+            let a = db.query(v.eye, &p)?;
+            let naive = db.query(v.eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..p })?;
+            for (s, q) in [(&mut sums, &a), (&mut naive_sums, &naive)] {
+                s[0] += q.stats.pages_read;
+                s[1] += q.stats.faces;
+                s[2] += q.items.len() as u64;
+            }
+            nodes += a.items.iter().filter(|i| i.kind == ItemKind::Node).count();
+            if let Some(r) = &renderer {
+                let image = r.render_answer(&db, &a, v, ColorMode::Shaded)?;
+                psnrs.push(fidelity::psnr(&image, &full[i]));
+            }
+        }
+        let share = |k: usize| 100.0 * sums[k] as f64 / naive_sums[k].max(1) as f64;
+        let psnr = if psnrs.is_empty() { "—".to_string() } else { format!("{:.1} dB", sequence_psnr(&psnrs)) };
+        println!("| {name} | {:.0} % | {:.0} % | {:.0} % | {nodes} | {psnr} |", share(0), share(1), share(2));
+    }
+    // Every cell, every η ≥ 1e-4: no query reads more pages than naive's.
+    let centres = grid.cell_centres();
+    let naive_pages: Vec<u64> = centres
+        .iter()
+        .map(|&at| db.query(at, &QueryParams { mode: Mode::Naive, ..Default::default() }).map(|a| a.stats.pages_read))
+        .collect::<hdov::Result<_>>()?;
+    for eta in [1e-4, 1e-3, 4e-3, 1e-2] {
+        let (mut over, mut sum) = (0, 0u64);
+        for (&at, &naive) in centres.iter().zip(&naive_pages) {
+            let pages = db.query(at, &QueryParams { eta, ..Default::default() })?.stats.pages_read;
+            over += usize::from(pages > naive);
+            sum += pages;
+        }
+        let share = 100.0 * sum as f64 / naive_pages.iter().sum::<u64>().max(1) as f64;
+        println!(
+            "η = {eta:e}: {over} of {} cells read more pages than naive; all cells {share:.0} % of naive's pages",
+            centres.len()
+        );
+    }
+    Ok(())
+}
