@@ -268,7 +268,8 @@ impl<'db> Session<'db> {
         let start = Instant::now();
         let look = self.look(look);
         let mut step = Step { step: self.steps, at: at.to_array(), ..Default::default() };
-        if let Some(answer) = self.method.flip(&mut self.access, at, look, self.answer.as_ref(), &mut step)? {
+        if let Some(mut answer) = self.method.flip(&mut self.access, at, look, self.answer.as_ref(), &mut step)? {
+            self.prefer_resident(&mut answer);
             step.flipped = true;
             step.pages_read = answer.stats.pages_read;
             step.hits = answer.stats.page_hits;
@@ -330,6 +331,30 @@ impl<'db> Session<'db> {
     /// The LOD records resident now, by offset in `geometry.blob`, with their sizes.
     pub fn resident(&self) -> impl Iterator<Item = (u64, usize)> + '_ {
         self.resident.iter().map(|(&k, bytes)| (k, bytes.len()))
+    }
+
+    /// Draws an item at a finer level that is resident already rather than load its own: a finer
+    /// level's error is smaller, so the answer's bound still holds, and the walk saves the load
+    /// (the coarsest such level; faces grow a little). A walk's answers change levels from cell to
+    /// cell (a stopped subtree's, and what the η rule relaxes); without this each change is a
+    /// load.
+    fn prefer_resident(&self, answer: &mut Answer) {
+        let catalog = self.db.catalog();
+        for item in &mut answer.items {
+            if self.resident.contains(&item.lod_ref.offset) {
+                continue;
+            }
+            let chain = match item.kind {
+                super::ItemKind::Object => catalog.object_lods(item.id),
+                super::ItemKind::Node => &catalog.node_lods[item.id as usize],
+            };
+            if let Some(l) = (0..item.lod as usize).rev().find(|&l| self.resident.contains(&chain[l].offset)) {
+                item.lod = l as u32;
+                item.lod_ref = chain[l];
+                item.faces = chain[l].faces;
+            }
+        }
+        answer.stats.faces = answer.items.iter().map(|i| u64::from(i.faces)).sum();
     }
 
     /// Loads what the new cell's answer needs and is not resident; evicts what it does not
