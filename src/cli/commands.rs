@@ -52,7 +52,8 @@ pub struct CityArgs {
 
 #[derive(Args)]
 pub struct BuildArgs {
-    /// The scene: an OBJ file (each o/g group one object) or a scene manifest .json.
+    /// The scene: a glTF 2.0 file (.gltf/.glb: each node with a mesh one object, shared meshes
+    /// stored once), an OBJ file (each o/g group one object) or a scene manifest .json.
     scene: PathBuf,
     /// The database directory to create.
     #[arg(long)]

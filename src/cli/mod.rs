@@ -26,7 +26,7 @@ enum Command {
     /// Generate a synthetic scene.
     #[command(subcommand)]
     Generate(commands::GenerateCommand),
-    /// Build a database from a scene (an OBJ file or a scene manifest .json).
+    /// Build a database from a scene (a glTF file, an OBJ file or a scene manifest .json).
     Build(commands::BuildArgs),
     /// Join shard databases (built with --shard I/N) into one.
     Merge(commands::MergeArgs),

@@ -3,6 +3,7 @@
 //! An object is the unit the R-tree indexes and the DoV is measured for. Its geometry is its base
 //! mesh under its transform; many objects may share one base mesh (instances are stored once).
 
+pub mod gltf;
 pub mod manifest;
 pub mod obj;
 
@@ -136,14 +137,21 @@ impl Scene {
         Mesh::merged(&parts)
     }
 
-    /// Loads an OBJ file or a scene manifest (`.json`), chosen by extension, and checks it.
+    /// Loads a glTF 2.0 file (`.gltf`, `.glb`), an OBJ file or a scene manifest (`.json`), chosen
+    /// by extension, and checks it.
     /// The second value holds warnings (e.g. skipped empty OBJ groups).
     pub fn load(path: &std::path::Path) -> Result<(Scene, Vec<String>)> {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         let (scene, warnings) = match ext.as_str() {
             "json" => (manifest::read(path)?, Vec::new()),
             "obj" => obj::read(path)?,
-            _ => return Err(Error::bad_file(path, "unknown scene format: expected .obj or .json (a scene manifest)")),
+            "gltf" | "glb" => gltf::read(path)?,
+            _ => {
+                return Err(Error::bad_file(
+                    path,
+                    "unknown scene format: expected .gltf, .glb, .obj or .json (a scene manifest)",
+                ));
+            }
         };
         scene.check().map_err(|reason| Error::bad_file(path, reason))?;
         Ok((scene, warnings))

@@ -1,0 +1,251 @@
+//! glTF 2.0 import: the node hierarchy flattened with its transforms, shared meshes stored once
+//! with instances (and `EXT_mesh_gpu_instancing`), strips and fans unrolled, points skipped; and
+//! bad files refused in one line without a panic: our own cases and assimp's test models.
+
+use std::path::{Path, PathBuf};
+
+use base64::Engine;
+use glam::Vec3;
+use hdov::Scene;
+use serde_json::{Value, json};
+
+/// A cube's 8 corners, its 12 triangles (u16), a strip of 4 indices and 3 instance offsets.
+fn buffer() -> Vec<u8> {
+    let mut b = Vec::new();
+    for i in 0..8u32 {
+        for bit in [1u32, 2, 4] {
+            b.extend((if i & bit != 0 { 1.0f32 } else { 0.0 }).to_le_bytes());
+        }
+    }
+    let tris: [u16; 36] =
+        [0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5, 0, 4, 5, 0, 5, 1, 2, 3, 7, 2, 7, 6, 0, 2, 6, 0, 6, 4, 1, 5, 7, 1, 7, 3];
+    b.extend(tris.iter().flat_map(|i| i.to_le_bytes()));
+    b.extend([0u16, 1, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    for x in [0.0f32, 20.0, 40.0] {
+        b.extend([x, 0.0, 30.0].iter().flat_map(|v| v.to_le_bytes()));
+    }
+    b
+}
+
+/// A document over [`buffer`]: a cube used by three nodes (one under a translated parent, one
+/// scaled, one instanced three times) and a mesh of a strip and a point primitive.
+fn document(buffer_len: usize, uri: Option<String>) -> Value {
+    let mut buffer = json!({ "byteLength": buffer_len });
+    if let Some(uri) = uri {
+        buffer["uri"] = json!(uri);
+    }
+    json!({
+        "asset": { "version": "2.0" },
+        "extensionsUsed": ["EXT_mesh_gpu_instancing"],
+        "buffers": [buffer],
+        "bufferViews": [
+            { "buffer": 0, "byteOffset": 0, "byteLength": 96 },
+            { "buffer": 0, "byteOffset": 96, "byteLength": 72 },
+            { "buffer": 0, "byteOffset": 168, "byteLength": 8 },
+            { "buffer": 0, "byteOffset": 176, "byteLength": 36 }
+        ],
+        "accessors": [
+            { "bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1] },
+            { "bufferView": 1, "componentType": 5123, "count": 36, "type": "SCALAR" },
+            { "bufferView": 2, "componentType": 5123, "count": 4, "type": "SCALAR" },
+            { "bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3" }
+        ],
+        "meshes": [
+            { "name": "cube", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1 }] },
+            { "name": "strip", "primitives": [
+                { "attributes": { "POSITION": 0 }, "indices": 2, "mode": 5 },
+                { "attributes": { "POSITION": 0 }, "mode": 0 }
+            ] }
+        ],
+        "nodes": [
+            { "name": "parent", "translation": [10, 0, 0], "children": [1] },
+            { "name": "box", "mesh": 0, "translation": [0, 5, 0] },
+            { "name": "box", "mesh": 0, "scale": [2, 2, 2] },
+            { "name": "crowd", "mesh": 0, "extensions": { "EXT_mesh_gpu_instancing": { "attributes": { "TRANSLATION": 3 } } } },
+            { "name": "ribbon", "mesh": 1 }
+        ],
+        "scenes": [{ "nodes": [0, 2, 3, 4] }],
+        "scene": 0
+    })
+}
+
+fn write_gltf(dir: &Path, name: &str, doc: &Value) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_vec_pretty(doc).unwrap()).unwrap();
+    path
+}
+
+fn data_uri(bin: &[u8]) -> String {
+    format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(bin))
+}
+
+/// A `.glb`: header, JSON chunk (space-padded), BIN chunk (zero-padded).
+fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut json = serde_json::to_vec(doc).unwrap();
+    while !json.len().is_multiple_of(4) {
+        json.push(b' ');
+    }
+    let mut bin = bin.to_vec();
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut out = Vec::new();
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend((total as u32).to_le_bytes());
+    out.extend((json.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(&json);
+    out.extend((bin.len() as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(&bin);
+    out
+}
+
+fn check_scene(scene: &Scene, warnings: &[String]) {
+    assert_eq!(scene.meshes.len(), 2, "the cube is stored once, beside the strip mesh");
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(names, ["box", "box#2", "crowd", "crowd#2", "crowd#3", "ribbon"]);
+    let bounds = |name: &str| {
+        let i = scene.objects.iter().position(|o| o.name == name).unwrap();
+        scene.object_mesh(i).bounds().transformed(&scene.objects[i].transform)
+    };
+    // The child of the translated parent: both translations.
+    assert_eq!(bounds("box").min, Vec3::new(10.0, 5.0, 0.0));
+    assert_eq!(bounds("box#2").max, Vec3::splat(2.0));
+    assert_eq!(bounds("crowd#3").min, Vec3::new(40.0, 0.0, 30.0));
+    let cube = scene.objects.iter().filter(|o| o.mesh == scene.objects[0].mesh).count();
+    assert_eq!(cube, 5, "five instances of one cube");
+    // The strip of 4 indices is two triangles; the points are skipped and said so.
+    let strip = scene.objects.iter().position(|o| o.name == "ribbon").unwrap();
+    assert_eq!(scene.object_mesh(strip).triangle_count(), 2);
+    assert!(warnings.iter().any(|w| w.contains("Points")), "{warnings:?}");
+}
+
+#[test]
+fn gltf_and_glb_scenes_import_with_their_hierarchy_and_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = buffer();
+    let gltf = write_gltf(dir.path(), "scene.gltf", &document(bin.len(), Some(data_uri(&bin))));
+    let (scene, warnings) = Scene::load(&gltf).unwrap();
+    check_scene(&scene, &warnings);
+    // The same as a .glb, and with the buffer in a file beside the .gltf.
+    let glb_path = dir.path().join("scene.glb");
+    std::fs::write(&glb_path, glb(&document(bin.len(), None), &bin)).unwrap();
+    let (scene, warnings) = Scene::load(&glb_path).unwrap();
+    check_scene(&scene, &warnings);
+    std::fs::write(dir.path().join("scene.bin"), &bin).unwrap();
+    let beside = write_gltf(dir.path(), "beside.gltf", &document(bin.len(), Some("scene.bin".into())));
+    check_scene(&Scene::load(&beside).unwrap().0, &Scene::load(&beside).unwrap().1);
+}
+
+#[test]
+fn bad_gltf_files_are_refused_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = buffer();
+    let good = document(bin.len(), Some(data_uri(&bin)));
+    let mut nan = bin.clone();
+    nan[0..4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let mut far_index = bin.clone();
+    far_index[96..98].copy_from_slice(&99u16.to_le_bytes());
+    type Edit = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        ("view past its buffer", Box::new(|d| d["bufferViews"][0]["byteLength"] = json!(4096)), "past its buffer"),
+        ("2^31 elements", Box::new(|d| d["accessors"][0]["count"] = json!(1u64 << 31)), "do not fit"),
+        ("non-finite position", Box::new(move |d| d["buffers"][0]["uri"] = json!(data_uri(&nan))), "non-finite"),
+        (
+            "index past the vertices",
+            Box::new(move |d| d["buffers"][0]["uri"] = json!(data_uri(&far_index))),
+            "past its",
+        ),
+        ("a node cycle", Box::new(|d| d["nodes"][1]["children"] = json!([0])), "reached twice"),
+        (
+            "draco",
+            Box::new(|d| {
+                d["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
+                d["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+            }),
+            "KHR_draco_mesh_compression",
+        ),
+        ("an index to no mesh", Box::new(|d| d["nodes"][1]["mesh"] = json!(7)), "invalid glTF"),
+        (
+            "a bad data URI",
+            Box::new(|d| d["buffers"][0]["uri"] = json!("data:application/octet-stream;base64,@@@")),
+            "base64",
+        ),
+        ("a URL", Box::new(|d| d["buffers"][0]["uri"] = json!("http://example.com/a.bin")), "not a file beside"),
+    ];
+    for (what, edit, expect) in cases {
+        let mut doc = good.clone();
+        edit(&mut doc);
+        let path = write_gltf(dir.path(), "bad.gltf", &doc);
+        let err = Scene::load(&path).expect_err(what).to_string();
+        assert!(err.contains(expect), "{what}: expected '{expect}' in: {err}");
+        assert!(err.contains("bad.gltf") && !err.contains('\n'), "{what}: {err}");
+    }
+    // A .glb cut short anywhere is refused, never a panic.
+    let whole = glb(&document(bin.len(), None), &bin);
+    for cut in [0, 4, 11, 12, 19, 40, whole.len() / 2, whole.len() - 1] {
+        let path = dir.path().join("cut.glb");
+        std::fs::write(&path, &whole[..cut]).unwrap();
+        assert!(Scene::load(&path).is_err(), "a .glb cut at {cut} of {} bytes", whole.len());
+    }
+}
+
+/// assimp's glTF 2.0 test models: the broken ones are refused in one line, the sound ones load,
+/// and none panics (`assimp-testmodels`, which CI installs).
+#[test]
+fn assimp_gltf_models_load_or_are_refused() {
+    let root = Path::new("/usr/share/assimp/models/glTF2");
+    if !root.exists() {
+        assert!(std::env::var("HDOV_REQUIRE_TESTDATA").as_deref() != Ok("1"), "assimp-testmodels is required");
+        println!("skipped: no assimp-testmodels");
+        return;
+    }
+    let refused = [
+        "IncorrectVertexArrays/Cube.gltf",
+        "IndexOutOfRange/IndexOutOfRange.gltf",
+        "IndexOutOfRange/AllIndicesOutOfRange.gltf",
+        "MissingBin/BoxTextured.gltf",
+        "RecursiveNodes/RecursiveNodes.gltf",
+        "SchemaFailures/sceneWrongType.gltf",
+        "TestNoRootNode/SceneWithoutNodes.gltf",
+        "TestNoRootNode/NoScene.gltf",
+        "BoxWithInfinites-glTF-Binary/BoxWithInfinites.glb",
+        "wrongTypes/badNumber.gltf",
+        "wrongTypes/badObject.gltf",
+        "wrongTypes/badUint.gltf",
+        "wrongTypes/badArray.gltf",
+        "wrongTypes/badString.gltf",
+    ];
+    for f in refused {
+        let err = Scene::load(&root.join(f)).expect_err(f).to_string();
+        assert!(!err.contains('\n'), "{f}: {err}");
+    }
+    for f in [
+        "BoxTextured-glTF/BoxTextured.gltf",
+        "BoxTextured-glTF-Binary/BoxTextured.glb",
+        "2CylinderEngine-glTF-Binary/2CylinderEngine.glb",
+    ] {
+        let (scene, _) = Scene::load(&root.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(scene.triangle_count() > 0, "{f}");
+    }
+    // The glTF Asset Generator's cases: each loads or is refused; none panics.
+    let mut files = Vec::new();
+    let mut dirs = vec![root.join("glTF-Asset-Generator")];
+    while let Some(d) = dirs.pop() {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "gltf" || x == "glb") {
+                files.push(p);
+            }
+        }
+    }
+    assert!(!files.is_empty());
+    for f in files {
+        let _ = Scene::load(&f);
+    }
+}
