@@ -57,7 +57,8 @@ macro_rules! internal_modules {
 }
 
 internal_modules!(
-    build, camera, db, dov, error, format, geom, gfx, grid, lod, overwrite, progress, query, record, rtree, scene
+    build, camera, db, dov, error, export, format, geom, gfx, grid, lod, overwrite, progress, query, record, rtree,
+    scene
 );
 
 pub mod city;
@@ -70,6 +71,7 @@ pub use db::Database;
 pub use db::info::Info;
 pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Param, Result};
+pub use export::{write_answer_glb, write_scene_glb};
 pub use format::Manifest;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,

@@ -17,7 +17,7 @@ const LAYERS: &[&[&str]] = &[
     &["dov"],
     &["db"],
     &["build", "query"],
-    &["review", "render"],
+    &["review", "render", "export"],
 ];
 
 /// The modules on the library's public face (the rest is private without `internals`).

@@ -190,6 +190,25 @@ pub struct InfoArgs {
     json: bool,
 }
 
+#[derive(Args)]
+pub struct ExportArgs {
+    db: PathBuf,
+    /// The glTF binary to write (.glb); an existing file is refused.
+    #[arg(long)]
+    out: PathBuf,
+    /// The level of detail of every object (0 = full detail; an object's coarsest where its chain
+    /// is shorter).
+    #[arg(long, default_value_t = 0)]
+    lod: u32,
+}
+
+pub fn export(a: ExportArgs) -> Result<()> {
+    let db = Database::open(&a.db)?;
+    hdov::write_scene_glb(&db, a.lod, &a.out)?;
+    println!("{}: {} objects at LOD {} as glTF", a.out.display(), db.catalog().objects.len(), a.lod);
+    Ok(())
+}
+
 pub fn generate(cmd: GenerateCommand) -> Result<()> {
     let GenerateCommand::City(a) = cmd;
     let city = CityParams { seed: a.seed, blocks: a.blocks, scale: a.scale, detail_model: None };

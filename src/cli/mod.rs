@@ -41,6 +41,8 @@ enum Command {
     /// Draw the full-detail scene or a query's answer from a camera into a PNG; report PSNR and
     /// coverage difference against full detail.
     Render(render::RenderCmd),
+    /// Write a database's whole scene as a glTF binary (.glb), to check its geometry in any viewer.
+    Export(commands::ExportArgs),
 }
 
 pub fn main() -> ExitCode {
@@ -66,6 +68,7 @@ pub fn main() -> ExitCode {
         Command::Query(a) => query::query(a),
         Command::Walk(a) => query::walk(a),
         Command::Render(a) => render::render(a),
+        Command::Export(a) => commands::export(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -90,6 +90,9 @@ pub struct QueryCmd {
     /// Items listed in the summary (all of them with --json).
     #[arg(long, default_value_t = 20)]
     list: usize,
+    /// Also write the answer as a glTF binary (.glb): one node per item at its level.
+    #[arg(long)]
+    out: Option<PathBuf>,
     #[arg(long)]
     json: bool,
 }
@@ -99,6 +102,12 @@ pub fn query(a: QueryCmd) -> Result<()> {
     let answer = db.query(a.at, &a.query.params())?;
     for w in &answer.warnings {
         eprintln!("warning: {w}");
+    }
+    if let Some(out) = &a.out {
+        hdov::write_answer_glb(&db, &answer, out)?;
+        if !a.json {
+            println!("{}: {} items as glTF", out.display(), answer.items.len());
+        }
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&answer).expect("serialisable"));
