@@ -223,6 +223,9 @@ fn assimp_gltf_models_load_or_are_refused() {
         let err = Scene::load(&root.join(f)).expect_err(f).to_string();
         assert!(!err.contains('\n'), "{f}: {err}");
     }
+    // Compressed geometry is refused by the extension's name.
+    let draco = Scene::load(&root.join("draco/2CylinderEngine.gltf")).unwrap_err().to_string();
+    assert!(draco.contains("KHR_draco_mesh_compression"), "{draco}");
     for f in [
         "BoxTextured-glTF/BoxTextured.gltf",
         "BoxTextured-glTF-Binary/BoxTextured.glb",
@@ -248,4 +251,30 @@ fn assimp_gltf_models_load_or_are_refused() {
     for f in files {
         let _ = Scene::load(&f);
     }
+}
+
+/// Instances cost no geometry: sixty instances of the cube store the same leaf LODs as three.
+/// (Internal LODs summarise world-space subtrees, so they grow with instances: every node keeps
+/// one level, and on a crowd of 12-face cubes that level outweighs the one stored cube.)
+#[test]
+fn geometry_grows_with_base_meshes_not_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let leaf_bytes = |instances: usize| {
+        let mut bin = buffer();
+        bin.truncate(176);
+        for k in 0..instances {
+            bin.extend([(k % 10) as f32 * 3.0, 0.0, (k / 10) as f32 * 3.0 + 30.0].iter().flat_map(|v| v.to_le_bytes()));
+        }
+        let mut doc = document(bin.len(), Some(data_uri(&bin)));
+        doc["bufferViews"][3]["byteLength"] = json!(12 * instances);
+        doc["accessors"][3]["count"] = json!(instances);
+        let gltf = write_gltf(dir.path(), &format!("crowd{instances}.gltf"), &doc);
+        let (scene, _) = Scene::load(&gltf).unwrap();
+        assert_eq!(scene.objects.len(), 3 + instances);
+        let out = dir.path().join(format!("crowd{instances}.hdov"));
+        let params = hdov::BuildParams { visibility: None, ..Default::default() };
+        hdov::build(&scene, &out, &params, hdov::Overwrite::Never, &hdov::Progress::hidden()).unwrap();
+        hdov::Database::open(&out).unwrap().info().unwrap().leaf_lod_bytes
+    };
+    assert_eq!(leaf_bytes(3), leaf_bytes(60));
 }
