@@ -253,9 +253,9 @@ fn assimp_gltf_models_load_or_are_refused() {
     }
 }
 
-/// Instances cost no geometry: sixty instances of the cube store the same leaf LODs as three.
-/// (Internal LODs summarise world-space subtrees, so they grow with instances: every node keeps
-/// one level, and on a crowd of 12-face cubes that level outweighs the one stored cube.)
+/// Instances cost no geometry: sixty instances of the cube store the same leaf LODs as three, and
+/// the internal LODs, world-space summaries that would grow with the instances, stay within the
+/// leaf LODs' bytes (nodes whose summary outweighs the one stored cube keep none).
 #[test]
 fn geometry_grows_with_base_meshes_not_instances() {
     let dir = tempfile::tempdir().unwrap();
@@ -269,12 +269,33 @@ fn geometry_grows_with_base_meshes_not_instances() {
         doc["bufferViews"][3]["byteLength"] = json!(12 * instances);
         doc["accessors"][3]["count"] = json!(instances);
         let gltf = write_gltf(dir.path(), &format!("crowd{instances}.gltf"), &doc);
-        let (scene, _) = Scene::load(&gltf).unwrap();
+        let (mut scene, _) = Scene::load(&gltf).unwrap();
         assert_eq!(scene.objects.len(), 3 + instances);
+        scene.grid = Some(hdov::ViewGrid::new(
+            hdov::Aabb::new(Vec3::new(-5.0, 1.5, 20.0), Vec3::new(35.0, 2.0, 28.0)),
+            [2, 1, 1],
+        ));
         let out = dir.path().join(format!("crowd{instances}.hdov"));
-        let params = hdov::BuildParams { visibility: None, ..Default::default() };
+        let visibility =
+            hdov::VisibilityParams { resolution: 16, backend: hdov::BackendKind::Cpu, ..Default::default() };
+        let params = hdov::BuildParams { fanout: Some(4), visibility: Some(visibility), ..Default::default() };
         hdov::build(&scene, &out, &params, hdov::Overwrite::Never, &hdov::Progress::hidden()).unwrap();
-        hdov::Database::open(&out).unwrap().info().unwrap().leaf_lod_bytes
+        let info = hdov::Database::open(&out).unwrap().info().unwrap();
+        assert!(info.internal_lod_bytes <= info.leaf_lod_bytes, "{info:?}");
+        // Every mode still answers, descending through nodes without internal LODs.
+        let db = hdov::Database::open(&out).unwrap();
+        let at = Vec3::new(15.0, 1.7, 24.0);
+        for (mode, eta, lod_rule) in [
+            (hdov::Mode::Threshold, 1.0, hdov::LodRule::default()),
+            (hdov::Mode::Threshold, 1.0, hdov::LodRule::Dov),
+            (hdov::Mode::Vmsse, 0.0, hdov::LodRule::default()),
+            (hdov::Mode::Budget, 0.0, hdov::LodRule::default()),
+        ] {
+            let p = hdov::QueryParams { mode, eta, lod_rule, budget: 10, ..Default::default() };
+            let a = db.query(at, &p).unwrap();
+            assert!(!a.items.is_empty(), "{mode} {lod_rule}");
+        }
+        info.leaf_lod_bytes
     };
     assert_eq!(leaf_bytes(3), leaf_bytes(60));
 }

@@ -53,7 +53,7 @@ pub struct Catalog {
     pub mesh_names: Vec<String>,
     /// Per base mesh, finest first (level 0 = full detail).
     pub mesh_lods: Vec<Vec<LodRef>>,
-    /// Per node id, finest first.
+    /// Per node id, finest first; empty where the node has no internal LOD (a query descends).
     pub node_lods: Vec<Vec<LodRef>>,
     /// Per node id.
     pub node_shapes: Vec<NodeShape>,
@@ -114,10 +114,11 @@ impl Catalog {
         if let Some(o) = self.objects.iter().find(|o| o.transform.iter().any(|x| !x.is_finite())) {
             return Err(format!("object '{}' has a non-finite transform", o.name));
         }
-        for chain in self.mesh_lods.iter().chain(&self.node_lods) {
-            if chain.is_empty() {
-                return Err("an empty LOD chain".into());
-            }
+        if self.mesh_lods.iter().any(Vec::is_empty) {
+            return Err("a base mesh without LODs".into());
+        }
+        // A node may have no internal LOD (its summary would outweigh what it summarises).
+        for chain in self.mesh_lods.iter().chain(self.node_lods.iter().filter(|c| !c.is_empty())) {
             if let Some(l) =
                 chain.iter().find(|l| l.offset.checked_add(u64::from(l.len)).is_none_or(|e| e > geometry_len))
             {

@@ -140,17 +140,21 @@ fn node_chain(parts: &[Part], ladder: &ErrorLadder) -> Vec<LodLevel> {
 /// Drops finest levels until all chains together hold at most `bytes` bytes of mesh data
 /// ([`mesh_bytes`]): those of the highest nodes first (the root's finest level is the one a query
 /// is least likely to stop at, since a node's DoV only grows towards the root), the biggest first
-/// among equals. Every node keeps its coarsest level.
+/// among equals. Nodes keep their coarsest level while finer ones are left to drop; past that
+/// (many instances of tiny meshes, whose summaries outweigh the one stored copy) nodes lose their
+/// last level too, the highest first, and a query descends through them.
 pub fn trim(internal: &mut [Vec<LodLevel>], tree: &RTree, bytes: usize) {
     let mut total: usize = internal.iter().flatten().map(mesh_bytes).sum();
-    while total > bytes {
-        let Some(id) = (0..internal.len())
-            .filter(|&i| internal[i].len() > 1)
-            .max_by_key(|&i| (tree.nodes[i].level, internal[i][0].faces()))
-        else {
-            break;
-        };
-        total -= mesh_bytes(&internal[id].remove(0));
+    for keep in [1, 0] {
+        while total > bytes {
+            let Some(id) = (0..internal.len())
+                .filter(|&i| internal[i].len() > keep)
+                .max_by_key(|&i| (tree.nodes[i].level, internal[i][0].faces()))
+            else {
+                break;
+            };
+            total -= mesh_bytes(&internal[id].remove(0));
+        }
     }
 }
 

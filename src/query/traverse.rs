@@ -213,6 +213,9 @@ impl Traversal<'_, '_> {
     /// not see); where no level does, the query descends.
     fn stop_at(&self, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Option<usize> {
         let chain = &self.db.catalog().node_lods[c as usize];
+        if chain.is_empty() {
+            return None; // no internal LOD: always descend
+        }
         let level = match (self.params.mode, self.params.lod_rule) {
             (Mode::Vmsse, _) => self.coarsest_within_tau(chain, d, mbr, 1.0)?,
             (_, LodRule::ScreenError { pixels }) => {
@@ -306,9 +309,12 @@ impl Traversal<'_, '_> {
         }
         // The refinement overran even after every child fell back to its own LOD: the root's
         // LOD that fits (fig. 6.2's fallback to the parent, at the top).
+        let chain = &self.db.catalog().node_lods[0];
+        if chain.is_empty() {
+            return Ok(true); // no root LOD to fall back to: the refinement stands, over budget
+        }
         let mbr = self.items.iter().fold(Aabb::EMPTY, |b, i| b.union(i.mbr));
         self.items.clear();
-        let chain = &self.db.catalog().node_lods[0];
         let (lod, over) = fit(chain, budget, 0);
         self.push_node(0, lod, 1.0, mbr);
         Ok(over)
@@ -337,7 +343,7 @@ impl Traversal<'_, '_> {
             } else {
                 let mark = self.items.len();
                 let refined = self.budget(e.child, d, share)?;
-                if refined <= share {
+                if refined <= share || self.db.catalog().node_lods[e.child as usize].is_empty() {
                     refined
                 } else {
                     // The refinement overran: the child's own LOD instead.
