@@ -187,7 +187,7 @@ impl Error {
 
 /// `text` on one line: its non-empty lines trimmed and joined with ": ", leaving out wgpu's
 /// "Caused by:" headings (a wgpu error is a heading, then its causes indented below it).
-pub fn one_line(text: &str) -> String {
+fn one_line(text: &str) -> String {
     let parts: Vec<&str> = text.lines().map(str::trim).filter(|l| !l.is_empty() && *l != "Caused by:").collect();
     parts.join(": ")
 }

@@ -106,7 +106,7 @@ pub fn build(
             })
             .collect()
     };
-    let ladder = crate::lod::hlod::ErrorLadder::for_diagonal(scene.bounds().extent().length());
+    let ladder = crate::lod::hlod::ErrorLadder::of(scene);
     let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
     geometry.finish()?;

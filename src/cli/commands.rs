@@ -432,9 +432,10 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         println!("scene: {}", scene_path.display());
         print_build(&db_path, &report);
     }
-    let asked = super::query::demo_queries(&db_path, a.json)?;
+    let db = Database::open(&db_path)?;
+    let asked = super::query::demo_queries(&db, a.json)?;
     let picture_path = a.out.join(DEMO_FILES[3]);
-    let picture = super::render::demo_picture(&Database::open(&db_path)?, asked.2, &picture_path)?;
+    let picture = super::render::demo_picture(&db, asked.2, &picture_path)?;
     if !a.json {
         match &picture {
             Some(_) => println!(

@@ -380,9 +380,8 @@ pub(super) fn summarise(steps: &[Step]) -> WalkSummary {
 /// and a walk along the first avenue. Prints them unless `json`; returns them as JSON.
 /// The demo's queries from one street viewpoint and its walk; returns them as JSON, and the
 /// viewpoint with the walk's direction there.
-pub(super) fn demo_queries(db_path: &Path, json: bool) -> Result<(serde_json::Value, serde_json::Value, (Vec3, Vec3))> {
-    let db = Database::open(db_path)?;
-    let grid = *db.grid().ok_or_else(|| Error::bad_file(db_path, "holds no grid"))?;
+pub(super) fn demo_queries(db: &Database, json: bool) -> Result<(serde_json::Value, serde_json::Value, (Vec3, Vec3))> {
+    let grid = *db.grid().ok_or_else(|| Error::bad_file(db.dir(), "holds no grid"))?;
     let path = hdov::city::avenue_walk(&grid, 150);
     let (at, along) = path[path.len() / 3];
     let ahead = Camera { look: Vec3::X, ..Camera::default() };

@@ -28,6 +28,11 @@ pub const LADDER_RUNGS: usize = 20;
 pub struct ErrorLadder(pub Vec<f32>);
 
 impl ErrorLadder {
+    /// The ladder of `scene`: the one its internal LODs and its catalog's descent table share.
+    pub fn of(scene: &Scene) -> ErrorLadder {
+        Self::for_diagonal(scene.bounds().extent().length())
+    }
+
     /// The ladder of a scene whose bounding box has diagonal `diagonal` (world units).
     pub fn for_diagonal(diagonal: f32) -> ErrorLadder {
         let e0 = (diagonal.max(f32::MIN_POSITIVE) * (-19f32).exp2()).max(f32::MIN_POSITIVE);
@@ -43,28 +48,26 @@ enum Part<'a> {
 }
 
 impl Part<'_> {
-    /// The coarsest level with world error ≤ `error`: its mesh in world space, faces and error.
-    fn at(&self, error: f32) -> Option<(Mesh, usize, f32)> {
-        match self {
-            Part::Object { chain, transform, scale } => {
-                // Level 0 has error 0: an object always has a level.
-                let l = chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0);
-                Some((chain[l].mesh.transformed(transform), chain[l].faces(), chain[l].error * scale))
+    /// The coarsest level with world error ≤ `error`: its index, faces and world error. An
+    /// object always has one (level 0 has error 0); a child node may not.
+    fn level(&self, error: f32) -> Option<(usize, usize, f32)> {
+        let (chain, scale, l) = match self {
+            Part::Object { chain, scale, .. } => {
+                (*chain, *scale, chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0))
             }
-            Part::Node(chain) => {
-                let l = chain.iter().rposition(|l| l.error <= error)?;
-                Some((chain[l].mesh.clone(), chain[l].faces(), chain[l].error))
-            }
-        }
+            Part::Node(chain) => (*chain, 1.0, chain.iter().rposition(|l| l.error <= error)?),
+        };
+        Some((l, chain[l].faces(), chain[l].error * scale))
     }
 
-    fn faces_at(&self, error: f32) -> Option<usize> {
-        match self {
-            Part::Object { chain, scale, .. } => {
-                Some(chain[chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0)].faces())
-            }
-            Part::Node(chain) => chain.iter().rposition(|l| l.error <= error).map(|l| chain[l].faces()),
-        }
+    /// [`Part::level`]'s mesh in world space, faces and error.
+    fn at(&self, error: f32) -> Option<(Mesh, usize, f32)> {
+        let (l, faces, error) = self.level(error)?;
+        let mesh = match self {
+            Part::Object { chain, transform, .. } => chain[l].mesh.transformed(transform),
+            Part::Node(chain) => chain[l].mesh.clone(),
+        };
+        Some((mesh, faces, error))
     }
 }
 
@@ -105,7 +108,7 @@ fn node_chain(parts: &[Part], ladder: &ErrorLadder) -> Vec<LodLevel> {
     let mut coarse_first: Vec<LodLevel> = Vec::new();
     for &e in ladder.0.iter().rev() {
         let half = e / 2.0;
-        let Some(replaced) = parts.iter().map(|p| p.faces_at(half)).sum::<Option<usize>>() else { continue };
+        let Some(replaced) = parts.iter().map(|p| p.level(half).map(|l| l.1)).sum::<Option<usize>>() else { continue };
         if replaced < 4 {
             continue;
         }

@@ -63,7 +63,7 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
         .collect();
     let internal = match params.internal {
         InternalLods::Hlod => {
-            let ladder = hlod::ErrorLadder::for_diagonal(scene.bounds().extent().length());
+            let ladder = hlod::ErrorLadder::of(scene);
             let mut internal = hlod::build(scene, tree, &leaf, &ladder, progress);
             // The internal levels together weigh at most what the leaf chains weigh.
             let leaf_bytes: usize = leaf.iter().flatten().map(hlod::mesh_bytes).sum();

@@ -76,7 +76,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
             let positions = prim
                 .get(&gltf::Semantic::Positions)
                 .ok_or_else(|| bad(format!("mesh '{name}': a primitive without positions")))?;
-            let positions = read_vec3(&positions, &buffers).map_err(|r| bad(format!("mesh '{name}': positions: {r}")))?;
+            let positions = read_floats::<3>(&positions, &buffers).map_err(|r| bad(format!("mesh '{name}': positions: {r}")))?;
             let indices: Vec<u32> = match prim.indices() {
                 Some(a) => read_indices(&a, &buffers).map_err(|r| bad(format!("mesh '{name}': indices: {r}")))?,
                 None => (0..positions.len() as u32).collect(),
@@ -222,22 +222,19 @@ fn elements<'b>(a: &gltf::Accessor, buffers: &'b [Vec<u8>], size: usize) -> std:
     Ok((&buffer[start..start + need], stride))
 }
 
-fn read_vec3(a: &gltf::Accessor, buffers: &[Vec<u8>]) -> std::result::Result<Vec<[f32; 3]>, String> {
-    if a.data_type() != DataType::F32 || a.dimensions() != Dimensions::Vec3 || a.normalized() {
-        return Err(format!("{:?} {:?}, expected float VEC3", a.data_type(), a.dimensions()));
+/// A float accessor of `N` components (VEC3 or VEC4), element by element.
+fn read_floats<const N: usize>(a: &gltf::Accessor, buffers: &[Vec<u8>]) -> std::result::Result<Vec<[f32; N]>, String> {
+    let dimensions = match N {
+        3 => Dimensions::Vec3,
+        4 => Dimensions::Vec4,
+        _ => unreachable!("VEC3 and VEC4 are read"),
+    };
+    if a.data_type() != DataType::F32 || a.dimensions() != dimensions || a.normalized() {
+        return Err(format!("{:?} {:?}, expected float {dimensions:?}", a.data_type(), a.dimensions()));
     }
-    let (bytes, stride) = elements(a, buffers, 12)?;
+    let (bytes, stride) = elements(a, buffers, 4 * N)?;
     let f = |b: &[u8], k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
-    Ok((0..a.count()).map(|i| &bytes[i * stride..]).map(|b| [f(b, 0), f(b, 1), f(b, 2)]).collect())
-}
-
-fn read_vec4(a: &gltf::Accessor, buffers: &[Vec<u8>]) -> std::result::Result<Vec<[f32; 4]>, String> {
-    if a.data_type() != DataType::F32 || a.dimensions() != Dimensions::Vec4 || a.normalized() {
-        return Err(format!("{:?} {:?}, expected float VEC4", a.data_type(), a.dimensions()));
-    }
-    let (bytes, stride) = elements(a, buffers, 16)?;
-    let f = |b: &[u8], k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
-    Ok((0..a.count()).map(|i| &bytes[i * stride..]).map(|b| [f(b, 0), f(b, 1), f(b, 2), f(b, 3)]).collect())
+    Ok((0..a.count()).map(|i| &bytes[i * stride..]).map(|b| std::array::from_fn(|k| f(b, k))).collect())
 }
 
 fn read_indices(a: &gltf::Accessor, buffers: &[Vec<u8>]) -> std::result::Result<Vec<u32>, String> {
@@ -292,9 +289,9 @@ fn instances(doc: &gltf::Document, node: &gltf::Node, buffers: &[Vec<u8>]) -> st
             }
         }
     };
-    let t = doc_accessor("TRANSLATION")?.map(|a| read_vec3(&a, buffers)).transpose()?;
-    let r = doc_accessor("ROTATION")?.map(|a| read_vec4(&a, buffers)).transpose()?;
-    let s = doc_accessor("SCALE")?.map(|a| read_vec3(&a, buffers)).transpose()?;
+    let t = doc_accessor("TRANSLATION")?.map(|a| read_floats::<3>(&a, buffers)).transpose()?;
+    let r = doc_accessor("ROTATION")?.map(|a| read_floats::<4>(&a, buffers)).transpose()?;
+    let s = doc_accessor("SCALE")?.map(|a| read_floats::<3>(&a, buffers)).transpose()?;
     let counts: Vec<usize> = [t.as_ref().map(Vec::len), r.as_ref().map(Vec::len), s.as_ref().map(Vec::len)].into_iter().flatten().collect();
     let n = *counts.first().ok_or("EXT_mesh_gpu_instancing names no attribute")?;
     if counts.iter().any(|&c| c != n) {
