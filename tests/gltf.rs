@@ -299,3 +299,93 @@ fn geometry_grows_with_base_meshes_not_instances() {
     };
     assert_eq!(leaf_bytes(3), leaf_bytes(60));
 }
+
+/// `glb` written as OBJ, one `o` group per node that draws a mesh, in world space: through the
+/// `gltf` crate's own validation, accessor reader and transforms, not hdov's importer (the same
+/// conversion as `tools/embree/glb_to_obj.py`, which needs Python's trimesh).
+fn glb_as_obj(glb: &Path) -> String {
+    use std::fmt::Write;
+    let bytes = std::fs::read(glb).unwrap();
+    let file = gltf::Gltf::from_slice(&bytes).unwrap();
+    let blob = file.blob.clone().unwrap();
+    let mut obj = String::new();
+    let mut base = 1usize;
+    let scene = file.document.default_scene().unwrap();
+    // Pre-order, children in document order.
+    let mut stack: Vec<(gltf::Node, glam::Mat4)> = scene.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect();
+    stack.reverse();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * glam::Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let Some(mesh) = node.mesh() {
+            writeln!(obj, "o node{}", node.index()).unwrap();
+            let mirrored = world.determinant() < 0.0;
+            for prim in mesh.primitives() {
+                assert_eq!(prim.mode(), gltf::mesh::Mode::Triangles, "the sample holds triangle lists only");
+                let reader = prim.reader(|_| Some(&blob[..]));
+                let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+                for p in &positions {
+                    let [x, y, z] = world.transform_point3(Vec3::from(*p)).to_array();
+                    writeln!(obj, "v {x} {y} {z}").unwrap();
+                }
+                let indices: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+                for t in indices.chunks_exact(3) {
+                    let [a, b, c] = [t[0], t[1], t[2]].map(|i| i as usize + base);
+                    // A mirroring node keeps its outward winding.
+                    let (b, c) = if mirrored { (c, b) } else { (b, c) };
+                    writeln!(obj, "f {a} {b} {c}").unwrap();
+                }
+                base += positions.len();
+            }
+        }
+        stack.extend(node.children().map(|c| (c, world)).collect::<Vec<_>>().into_iter().rev());
+    }
+    obj
+}
+
+/// A real model built from its `.glb` and from its OBJ conversion gives the same triangles and
+/// the same DoV: 2CylinderEngine (67 parts sharing 29 meshes) at three points among its parts.
+#[test]
+fn the_engine_from_glb_and_from_obj_agree() {
+    let glb = Path::new("/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
+    if !glb.exists() {
+        assert!(std::env::var("HDOV_REQUIRE_TESTDATA").as_deref() != Ok("1"), "assimp-testmodels is required");
+        println!("skipped: no assimp-testmodels");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("engine.obj");
+    std::fs::write(&obj, glb_as_obj(glb)).unwrap();
+    let (from_glb, _) = Scene::load(glb).unwrap();
+    let (from_obj, _) = Scene::load(&obj).unwrap();
+    assert_eq!(from_glb.objects.len(), from_obj.objects.len());
+    assert_eq!((from_glb.meshes.len(), from_obj.meshes.len()), (29, 67), "shared meshes are stored once from glTF");
+    assert_eq!(from_glb.triangle_count(), from_obj.triangle_count());
+    assert_eq!(from_glb.triangle_count(), 110_336, "the sample less its zero-area triangles");
+    let near = |a: hdov::Aabb, b: hdov::Aabb| {
+        (a.min - b.min).abs().max_element() < 1e-3 && (a.max - b.max).abs().max_element() < 1e-3
+    };
+    // Object k is the same part in both: the tight box of its world-space triangles says so.
+    let tight = |s: &Scene, k: usize| hdov::Aabb::from_points(s.object_triangles(k).flatten());
+    for k in 0..from_glb.objects.len() {
+        let (a, b) = (tight(&from_glb, k), tight(&from_obj, k));
+        assert!(near(a, b), "object {k}: {a:?} against {b:?}");
+    }
+    let a = from_glb.bounds();
+    // Three points among the engine's parts, each seeing nine or more of them: R = 64, the CPU backend.
+    let (c, e) = (a.center(), a.extent());
+    let points =
+        [c + e * Vec3::new(-0.3, 0.55, -0.4), c + e * Vec3::new(0.05, -0.1, 0.6), c + e * Vec3::new(0.0, 0.6, 0.0)];
+    let mut glb_backend = hdov::open_backend(&from_glb, 64, hdov::BackendKind::Cpu, &Default::default()).unwrap();
+    let mut obj_backend = hdov::open_backend(&from_obj, 64, hdov::BackendKind::Cpu, &Default::default()).unwrap();
+    for p in points {
+        let (x, y) = (glb_backend.measure(p).unwrap(), obj_backend.measure(p).unwrap());
+        // Objects come in the same order from both files; compare each object's DoV.
+        assert_eq!(x.objects.len(), y.objects.len(), "{p}: the same objects are seen");
+        let total = |d: &hdov::PointDov| d.objects.iter().map(|o| o.1).sum::<f64>();
+        assert!(total(&x) > 0.15 && x.objects.len() >= 9, "{p}: the engine's parts fill some of the view");
+        for (&(i, d), &(j, f)) in x.objects.iter().zip(&y.objects) {
+            assert_eq!(i, j, "{p}");
+            assert!((d - f).abs() <= 0.005 * d.max(f), "{p} object {i}: {d} against {f}");
+        }
+    }
+}

@@ -64,6 +64,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     // Base meshes by glTF mesh index (`None`: no triangles).
     let mut meshes: Vec<Option<u32>> = Vec::new();
     let mut scene = Scene::default();
+    let mut degenerate = 0;
     for mesh in doc.meshes() {
         let name = mesh.name().map_or_else(|| format!("mesh {}", mesh.index()), str::to_string);
         let mut out = Mesh::default();
@@ -89,6 +90,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
             out.positions.extend(positions);
             out.indices.extend(triangles.into_iter().map(|i| i + base));
         }
+        degenerate += out.drop_degenerate();
         if out.indices.is_empty() {
             meshes.push(None);
             continue;
@@ -96,6 +98,9 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         out.check().map_err(|r| bad(format!("mesh '{name}': {r}")))?;
         meshes.push(Some(scene.meshes.len() as u32));
         scene.meshes.push(BaseMesh { name, mesh: out });
+    }
+    if degenerate > 0 {
+        warnings.push(format!("{}: {degenerate} zero-area triangles dropped (never seen)", path.display()));
     }
     // The scene graph, flattened from its roots.
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {

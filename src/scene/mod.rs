@@ -64,8 +64,6 @@ impl Mesh {
         out
     }
 
-    /// Checks what every consumer relies on: finite coordinates, whole triangles, indices in range.
-    /// Returns the reason of the first violation.
     /// The cube [-0.5, 0.5]³: 8 vertices, 12 triangles, counter-clockwise seen from outside.
     pub fn unit_cube() -> Mesh {
         let positions: Vec<[f32; 3]> =
@@ -82,7 +80,29 @@ impl Mesh {
         Mesh { positions, indices }
     }
 
-    /// Checks that the mesh has triangles, finite vertices and indices in range.
+    /// Removes zero-area triangles and returns how many went: they can never be seen, so they
+    /// would only cost draw time and LOD bytes (tobj makes them of 1- and 2-vertex faces; CAD
+    /// exports carry them). Triangles with out-of-range indices stay, for `check` to report.
+    pub(crate) fn drop_degenerate(&mut self) -> usize {
+        let before = self.indices.len() / 3;
+        let positions = &self.positions;
+        let p = |i: u32| Vec3::from(positions[i as usize]);
+        let kept: Vec<u32> = self
+            .indices
+            .chunks_exact(3)
+            .filter(|t| {
+                !t.iter().all(|&i| (i as usize) < positions.len())
+                    || (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])) != Vec3::ZERO
+            })
+            .flatten()
+            .copied()
+            .collect();
+        self.indices = kept;
+        before - self.indices.len() / 3
+    }
+
+    /// Checks what every consumer relies on: triangles, finite vertices, whole triangles and
+    /// indices in range. Returns the reason of the first violation.
     pub fn check(&self) -> std::result::Result<(), String> {
         if self.indices.is_empty() {
             // An empty mesh has no box: it would poison the tree above it.

@@ -29,12 +29,13 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     for model in models {
         let m = model.mesh;
         let group = if model.name.is_empty() { "unnamed".to_string() } else { model.name };
-        let indices = drop_degenerate(&m.positions, m.indices);
-        if indices.is_empty() {
+        let mut mesh =
+            Mesh { positions: m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(), indices: m.indices };
+        mesh.drop_degenerate();
+        if mesh.indices.is_empty() {
             warnings.push(format!("{}: group '{group}' has no faces; skipped", path.display()));
             continue;
         }
-        let mesh = Mesh { positions: m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(), indices };
         mesh.check().map_err(|r| Error::bad_file(path, format!("group '{group}': {r}")))?;
         // Repeated group names are common in CAD exports; suffixes keep object names unique.
         let uses = name_uses.entry(group.clone()).or_insert(0);
@@ -47,22 +48,6 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         return Err(Error::bad_file(path, "no faces: the OBJ file holds no triangle or polygon"));
     }
     Ok((scene, warnings))
-}
-
-/// Removes zero-area triangles: tobj turns 1- and 2-vertex faces into them, and they can never be
-/// seen, so they would only cost draw time.
-fn drop_degenerate(positions: &[f32], indices: Vec<u32>) -> Vec<u32> {
-    let p = |i: u32| glam::Vec3::from_slice(&positions[3 * i as usize..3 * i as usize + 3]);
-    let in_range = |i: u32| (3 * i as usize + 3) <= positions.len();
-    indices
-        .chunks_exact(3)
-        .filter(|t| {
-            // Out-of-range indices are kept so that `Mesh::check` reports them.
-            !t.iter().all(|&i| in_range(i)) || (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])) != glam::Vec3::ZERO
-        })
-        .flatten()
-        .copied()
-        .collect()
 }
 
 #[cfg(test)]
