@@ -12,103 +12,137 @@ use serde_json::{Value, json};
 use crate::db::Database;
 use crate::error::{Error, Result};
 use crate::format::catalog::LodRef;
-use crate::query::{Answer, ItemKind};
+use crate::query::{Answer, Item, ItemKind};
 
 /// One node to write: what it draws, under which transform, and what it is.
-struct Part {
-    kind: ItemKind,
-    id: u32,
-    name: String,
-    lod: u32,
+struct Part<'a> {
+    item: &'a Item,
     dov: Option<f32>,
-    lod_ref: LodRef,
     transform: Mat4,
 }
 
 /// The answer as a `.glb` at `out`: every item a node at its level. Refuses an existing `out`.
 pub fn write_answer_glb(db: &Database, answer: &Answer, out: &Path) -> Result<()> {
-    let parts = answer
-        .items
-        .iter()
-        .map(|i| Part {
-            kind: i.kind,
-            id: i.id,
-            name: i.name.to_string(),
-            lod: i.lod,
-            dov: Some(i.dov),
-            lod_ref: i.lod_ref,
-            transform: transform_of(db, i.kind, i.id),
-        })
-        .collect::<Vec<_>>();
-    write_glb(db, &parts, out)
+    let parts: Vec<Part> =
+        answer.items.iter().map(|i| Part { item: i, dov: Some(i.dov), transform: db.item_transform(i) }).collect();
+    write_new(out, &glb_of(db, &parts)?)
 }
 
 /// The whole scene as a `.glb` at `out`: every object at its level `lod` (its coarsest where its
 /// chain is shorter; 0 = full detail). Refuses an existing `out`.
 pub fn write_scene_glb(db: &Database, lod: u32, out: &Path) -> Result<()> {
+    let items = scene_items(db, lod)?;
+    let parts: Vec<Part> = items.iter().map(|i| Part { item: i, dov: None, transform: db.item_transform(i) }).collect();
+    write_new(out, &glb_of(db, &parts)?)
+}
+
+/// Every object of the scene as an item at level `lod` (its coarsest where its chain is shorter),
+/// in object order, with its box from the tree's leaves and DoV 0: the "full scene" that a viewer
+/// compares an answer with. Reads every leaf page once.
+pub fn scene_items(db: &Database, lod: u32) -> Result<Vec<Item>> {
     let catalog = db.catalog();
-    let parts = (0..catalog.objects.len() as u32)
+    let mut mbrs = vec![None; catalog.objects.len()];
+    for n in 0..db.node_count() {
+        let page = db.node(n)?;
+        if page.node.is_leaf() {
+            for e in &page.node.entries {
+                if let Some(slot) = mbrs.get_mut(e.child as usize) {
+                    *slot = Some(e.mbr);
+                }
+            }
+        }
+    }
+    (0..catalog.objects.len() as u32)
         .map(|o| {
             let chain = catalog.object_lods(o);
             let l = (lod as usize).min(chain.len() - 1);
-            Part {
+            let mbr = mbrs[o as usize]
+                .ok_or_else(|| Error::bad_file(db.tree_file().path(), format!("no leaf holds object {o}")))?;
+            Ok(Item {
                 kind: ItemKind::Object,
                 id: o,
-                name: catalog.objects[o as usize].name.to_string(),
+                name: catalog.objects[o as usize].name.clone(),
                 lod: l as u32,
-                dov: None,
+                faces: chain[l].faces,
+                dov: 0.0,
+                mbr,
                 lod_ref: chain[l],
-                transform: transform_of(db, ItemKind::Object, o),
-            }
+            })
         })
-        .collect::<Vec<_>>();
-    write_glb(db, &parts, out)
+        .collect()
 }
 
-fn transform_of(db: &Database, kind: ItemKind, id: u32) -> Mat4 {
-    match kind {
-        ItemKind::Object => Mat4::from_cols_array(&db.catalog().objects[id as usize].transform),
-        ItemKind::Node => Mat4::IDENTITY,
-    }
+/// One stored LOD level as a `.glb` of one node and one mesh, in the level's own coordinates
+/// (mesh space for an object's level, world space for a node's): what a streaming client fetches
+/// once per record and draws under each item's transform.
+pub fn lod_glb(db: &Database, lod: &LodRef) -> Result<Vec<u8>> {
+    let mut bin = Vec::new();
+    let (mut views, mut accessors) = (Vec::new(), Vec::new());
+    let mesh = push_mesh(db, lod, &mut bin, &mut views, &mut accessors)?;
+    let doc = json!({
+        "asset": asset(),
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0 }],
+        "meshes": [mesh],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{ "byteLength": bin.len() }],
+    });
+    Ok(glb(&doc, &bin))
 }
 
-fn write_glb(db: &Database, parts: &[Part], out: &Path) -> Result<()> {
-    if out.exists() {
-        return Err(Error::bad_file(out, "exists; choose another file"));
-    }
+fn asset() -> Value {
+    json!({ "version": "2.0", "generator": concat!("hdov ", env!("CARGO_PKG_VERSION")) })
+}
+
+/// Appends one LOD's positions and indices to `bin`, with their views and accessors; returns the
+/// glTF mesh (one primitive) that draws them.
+fn push_mesh(
+    db: &Database,
+    lod: &LodRef,
+    bin: &mut Vec<u8>,
+    views: &mut Vec<Value>,
+    accessors: &mut Vec<Value>,
+) -> Result<Value> {
+    let m = db.lod_mesh(lod)?;
+    let (lo, hi) = m
+        .positions
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &q| (lo.min(q.into()), hi.max(q.into())));
+    let positions = push_view(bin, views, bytemuck::cast_slice(&m.positions), 34962);
+    let indices = push_view(bin, views, bytemuck::cast_slice(&m.indices), 34963);
+    accessors.push(json!({ "bufferView": positions, "componentType": 5126, "count": m.positions.len(),
+        "type": "VEC3", "min": lo.to_array(), "max": hi.to_array() }));
+    accessors.push(json!({ "bufferView": indices, "componentType": 5125, "count": m.indices.len(), "type": "SCALAR" }));
+    Ok(json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 }, "indices": accessors.len() - 1 }] }))
+}
+
+/// The `.glb` of `parts`: items drawing the same stored record share one glTF mesh.
+fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes) = (Vec::new(), Vec::new(), Vec::new());
     let mut mesh_of: HashMap<u64, usize> = HashMap::new();
     let mut nodes = Vec::new();
     for p in parts {
-        let mesh = match mesh_of.get(&p.lod_ref.offset) {
+        let i = p.item;
+        let mesh = match mesh_of.get(&i.lod_ref.offset) {
             Some(&m) => m,
             None => {
-                let m = db.lod_mesh(&p.lod_ref)?;
-                let (lo, hi) = m
-                    .positions
-                    .iter()
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &q| (lo.min(q.into()), hi.max(q.into())));
-                let positions = push_view(&mut bin, &mut views, bytemuck::cast_slice(&m.positions), 34962);
-                let indices = push_view(&mut bin, &mut views, bytemuck::cast_slice(&m.indices), 34963);
-                accessors.push(json!({ "bufferView": positions, "componentType": 5126, "count": m.positions.len(),
-                    "type": "VEC3", "min": lo.to_array(), "max": hi.to_array() }));
-                accessors.push(json!({ "bufferView": indices, "componentType": 5125, "count": m.indices.len(), "type": "SCALAR" }));
-                meshes.push(json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 },
-                    "indices": accessors.len() - 1 }] }));
-                mesh_of.insert(p.lod_ref.offset, meshes.len() - 1);
+                meshes.push(push_mesh(db, &i.lod_ref, &mut bin, &mut views, &mut accessors)?);
+                mesh_of.insert(i.lod_ref.offset, meshes.len() - 1);
                 meshes.len() - 1
             }
         };
-        let kind = match p.kind {
+        let kind = match i.kind {
             ItemKind::Object => "object",
             ItemKind::Node => "node",
         };
-        let mut extras = json!({ "kind": kind, "id": p.id, "name": p.name, "lod": p.lod, "error": p.lod_ref.error });
+        let mut extras = json!({ "kind": kind, "id": i.id, "name": &*i.name, "lod": i.lod, "error": i.lod_ref.error });
         if let Some(d) = p.dov {
             extras["dov"] = json!(d);
         }
-        let mut node = json!({ "name": p.name, "mesh": mesh, "extras": extras });
+        let mut node = json!({ "name": &*i.name, "mesh": mesh, "extras": extras });
         if p.transform != Mat4::IDENTITY {
             node["matrix"] = json!(p.transform.to_cols_array());
         }
@@ -116,7 +150,7 @@ fn write_glb(db: &Database, parts: &[Part], out: &Path) -> Result<()> {
     }
     let node_ids: Vec<usize> = (0..nodes.len()).collect();
     let mut doc = json!({
-        "asset": { "version": "2.0", "generator": concat!("hdov ", env!("CARGO_PKG_VERSION")) },
+        "asset": asset(),
         "scene": 0,
         "scenes": [{ "nodes": node_ids }],
         "nodes": nodes,
@@ -127,13 +161,16 @@ fn write_glb(db: &Database, parts: &[Part], out: &Path) -> Result<()> {
     if !bin.is_empty() {
         doc["buffers"] = json!([{ "byteLength": bin.len() }]);
     }
-    write_new(out, &glb(&doc, &bin))
+    Ok(glb(&doc, &bin))
 }
 
 /// Writes `bytes` to a new file `out` (never over an existing one), synced; removes what it
 /// created if the write fails.
 fn write_new(out: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write;
+    if out.exists() {
+        return Err(Error::bad_file(out, "exists; choose another file"));
+    }
     let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(out).map_err(|e| Error::io(out, e))?;
     if let Err(e) = f.write_all(bytes).and_then(|()| f.sync_all()) {
         drop(f);

@@ -71,8 +71,9 @@ pub use db::Database;
 pub use db::info::Info;
 pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Param, Result};
-pub use export::{write_answer_glb, write_scene_glb};
+pub use export::{lod_glb, scene_items, write_answer_glb, write_scene_glb};
 pub use format::Manifest;
+pub use format::catalog::LodRef;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,
     LodParams, RayProbing, Sampling, Shard, VisibilityParams,

@@ -454,6 +454,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             "walk": asked.1,
             "picture": picture.is_some().then_some(&picture_path),
             "seconds": t.elapsed().as_secs_f64(),
+            "serve": format!("hdov serve {}", db_path.display()),
         });
         println!("{}", serde_json::to_string_pretty(&doc).expect("serialisable"));
     } else {
@@ -463,6 +464,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             db_path.display(),
             db_path.display()
         );
+        println!("walk it in a browser (http://127.0.0.1:8080/): hdov serve {}", db_path.display());
     }
     Ok(())
 }

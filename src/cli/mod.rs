@@ -6,6 +6,7 @@ mod args;
 mod commands;
 mod query;
 mod render;
+mod serve;
 
 use std::process::ExitCode;
 
@@ -43,6 +44,9 @@ enum Command {
     Render(render::RenderCmd),
     /// Write a database's whole scene as a glTF binary (.glb), to check its geometry in any viewer.
     Export(commands::ExportArgs),
+    /// Serve a database over HTTP, read-only: what is visible from here and its meshes as glTF,
+    /// with a walkthrough viewer at /.
+    Serve(serve::ServeCmd),
 }
 
 pub fn main() -> ExitCode {
@@ -69,6 +73,7 @@ pub fn main() -> ExitCode {
         Command::Walk(a) => query::walk(a),
         Command::Render(a) => render::render(a),
         Command::Export(a) => commands::export(a),
+        Command::Serve(a) => serve::serve(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -171,6 +171,23 @@ impl Database {
         Ok(self.geometry.get(lod.blob())?)
     }
 
+    /// The crc32 stored for one LOD level's record in `geometry.blob` (its bytes are checked when
+    /// read): a content tag for the record, such as the server's ETag.
+    pub fn lod_checksum(&self, lod: &LodRef) -> Result<u32> {
+        Ok(self.geometry.checksum(lod.blob())?)
+    }
+
+    /// Every stored LOD level: the base meshes' chains, then the nodes'. A reference from outside
+    /// (a URL) is valid only if it is one of these.
+    pub fn lod_refs(&self) -> impl Iterator<Item = &LodRef> + '_ {
+        self.catalog.mesh_lods.iter().chain(&self.catalog.node_lods).flatten()
+    }
+
+    /// An object's column-major model matrix (mesh space to world), `None` past the last object.
+    pub fn object_transform(&self, object: u32) -> Option<glam::Mat4> {
+        self.catalog.objects.get(object as usize).map(|o| glam::Mat4::from_cols_array(&o.transform))
+    }
+
     /// Loads one LOD mesh from `geometry.blob` (checksum verified).
     pub fn lod_mesh(&self, lod: &LodRef) -> Result<Mesh> {
         let bytes = self.geometry.get(lod.blob())?;

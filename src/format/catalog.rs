@@ -7,14 +7,18 @@ use serde::{Deserialize, Serialize};
 /// Where one LOD level lives and what it costs to draw.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LodRef {
+    /// Triangles of the level.
     pub faces: u32,
     /// The simplifier's error bound, in world units for internal LODs and mesh units for leaves.
     pub error: f32,
+    /// Byte offset of its record in `geometry.blob`: unique per stored level.
     pub offset: u64,
+    /// Bytes of the record's data.
     pub len: u32,
 }
 
 impl LodRef {
+    /// The record in `geometry.blob`.
     pub fn blob(&self) -> hdov_storage::BlobRef {
         hdov_storage::BlobRef { offset: self.offset, len: self.len }
     }

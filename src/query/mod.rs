@@ -332,6 +332,15 @@ impl Database {
         Ok(Answer::new(at, (cell, cell_id), params, access.layout_kind(), out.items, stats, warnings))
     }
 
+    /// The column-major matrix an item's level is drawn under: its object's model matrix, or the
+    /// identity for a node's internal LOD (stored in world space).
+    pub fn item_transform(&self, item: &Item) -> glam::Mat4 {
+        match item.kind {
+            ItemKind::Object => self.object_transform(item.id).unwrap_or(glam::Mat4::IDENTITY),
+            ItemKind::Node => glam::Mat4::IDENTITY,
+        }
+    }
+
     /// The cell holding `at` (points on an inner cell border belong to the upper cell).
     pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
         let grid =

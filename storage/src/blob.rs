@@ -166,6 +166,22 @@ impl BlobFile {
 
     /// The bytes of the record at `r`, with bounds, length and crc32 checked.
     pub fn get(&self, r: BlobRef) -> Result<&[u8]> {
+        let (data, crc) = self.locate(r)?;
+        let data = &self.map[data];
+        if crc32fast::hash(data) != crc {
+            return Err(Error::RecordChecksum { path: path_str(&self.path), offset: r.offset });
+        }
+        Ok(data)
+    }
+
+    /// The crc32 stored for the record at `r` (bounds and length checked, the bytes not hashed;
+    /// [`BlobFile::get`] checks them): a content tag for the record, such as an HTTP ETag.
+    pub fn checksum(&self, r: BlobRef) -> Result<u32> {
+        Ok(self.locate(r)?.1)
+    }
+
+    /// Where the data of the record at `r` lies in the file, and its stored crc32.
+    fn locate(&self, r: BlobRef) -> Result<(std::ops::Range<usize>, u32)> {
         let bad = |reason: String| Error::corrupt(&self.path, reason);
         let start = usize::try_from(r.offset)
             .ok()
@@ -177,14 +193,11 @@ impl BlobFile {
             return Err(bad(format!("record at byte {} has {stored_len} bytes, reference says {}", r.offset, r.len)));
         }
         let data_start = start + RECORD_HEADER_LEN;
-        let data = data_start
+        let end = data_start
             .checked_add(r.len as usize)
-            .and_then(|end| self.map.get(data_start..end))
+            .filter(|&end| end <= self.map.len())
             .ok_or_else(|| bad(format!("record at byte {} runs past the end", r.offset)))?;
-        if crc32fast::hash(data) != u32_at(&self.map, start + 4).unwrap_or(0) {
-            return Err(Error::RecordChecksum { path: path_str(&self.path), offset: r.offset });
-        }
-        Ok(data)
+        Ok((data_start..end, u32_at(&self.map, start + 4).unwrap_or(0)))
     }
 
     /// Reads every record, checking lengths and checksums, and that the records fill the data

@@ -1,0 +1,368 @@
+//! `hdov serve`: one database, opened once and shared read-only by every request, over HTTP (axum
+//! on tokio), with the viewer page at `/`.
+//!
+//! Routes: `/info`, `/query?at=…`, `/mesh/{offset}-{crc}.glb` (one stored LOD level, immutable:
+//! the URL names the record and its checksum), `/scene` (every object at full detail, the viewer's
+//! "full scene"), `/recorded-walk?kind=…` and the viewer's files. Safe by default: loopback unless
+//! `--addr` says otherwise, GET only, nothing writes, parameters and URLs bounded, mesh references
+//! checked against the catalog (no part of a request reaches the filesystem), a concurrency limit
+//! and a per-request timeout. A client's mistake is a 400 or 404 with `{"error": …}` in the
+//! command's words; only the database itself failing is a 500.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{Path, RawQuery, Request, State};
+use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use super::args::parse_vec3;
+use hdov::city::WalkKind;
+use hdov::{Camera, Database, Error, Item, LayoutKind, LodRef, LodRule, Mode, Param, QueryParams};
+
+/// Longest request target (path and query) served; a query needs under 200 bytes.
+const MAX_TARGET: usize = 2048;
+/// Most steps of a recorded walk.
+const MAX_WALK_STEPS: u32 = 10_000;
+
+#[derive(Args)]
+pub struct ServeCmd {
+    /// The database directory.
+    db: PathBuf,
+    /// Address to listen on: loopback unless you say otherwise (port 0 picks a free port).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    addr: SocketAddr,
+    /// Requests served at once; more wait for a turn.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    concurrency: u32,
+    /// Seconds a request may take before it is answered 408.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    timeout: u64,
+}
+
+/// What every request shares: the database and the set of stored levels a URL may name.
+struct Served {
+    db: Database,
+    /// Record offset → (level, stored crc32).
+    lods: HashMap<u64, (LodRef, u32)>,
+}
+
+pub fn serve(a: ServeCmd) -> hdov::Result<()> {
+    let db = Database::open(&a.db)?;
+    if db.grid().is_none() {
+        return Err(Error::bad_file(&a.db, "holds no viewing grid; nothing to serve queries from"));
+    }
+    let mut lods = HashMap::new();
+    for r in db.lod_refs() {
+        lods.insert(r.offset, (*r, db.lod_checksum(r)?));
+    }
+    let served = Arc::new(Served { db, lods });
+    // Database work is CPU-bound and short: threads beyond the cores only add memory (a heap
+    // arena each) and switches; requests past them wait in the concurrency limit's queue.
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .max_blocking_threads(2 * cores)
+        .enable_all()
+        .build()
+        .map_err(|e| Error::io("the server's runtime", e))?;
+    runtime.block_on(async move {
+        let listener =
+            tokio::net::TcpListener::bind(a.addr).await.map_err(|e| Error::io(format!("--addr {}", a.addr), e))?;
+        let addr = listener.local_addr().map_err(|e| Error::io(format!("--addr {}", a.addr), e))?;
+        if !addr.ip().is_loopback() {
+            eprintln!("warning: listening on {addr}, reachable from other machines (read-only)");
+        }
+        println!("hdov serve: http://{addr}/ ({})", a.db.display());
+        let app = router(served, a.concurrency as usize, Duration::from_secs(a.timeout));
+        axum::serve(listener, app)
+            .with_graceful_shutdown(stop_signal())
+            .await
+            .map_err(|e| Error::io("the server", e))?;
+        println!("hdov serve: stopped");
+        Ok(())
+    })
+}
+
+/// SIGINT (Ctrl-C) or SIGTERM: stop accepting, finish what is in flight, exit 0.
+async fn stop_signal() {
+    let interrupt = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .expect("a SIGTERM handler can be installed");
+        tokio::select! {
+            _ = interrupt => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = interrupt.await;
+}
+
+fn router(served: Arc<Served>, concurrency: usize, timeout: Duration) -> Router {
+    use tower_http::limit::RequestBodyLimitLayer;
+    use tower_http::timeout::TimeoutLayer;
+    Router::new()
+        .route("/", get(|| asset("text/html; charset=utf-8", include_bytes!("viewer/index.html"))))
+        .route("/viewer.js", get(|| asset("text/javascript", include_bytes!("viewer/viewer.js"))))
+        .route("/three.module.min.js", get(|| asset("text/javascript", include_bytes!("viewer/three.module.min.js"))))
+        .route("/three.core.min.js", get(|| asset("text/javascript", include_bytes!("viewer/three.core.min.js"))))
+        .route(
+            "/three-LICENSE.txt",
+            get(|| asset("text/plain; charset=utf-8", include_bytes!("viewer/three-LICENSE.txt"))),
+        )
+        .route("/info", get(info))
+        .route("/query", get(query))
+        .route("/scene", get(scene))
+        .route("/recorded-walk", get(recorded_walk))
+        .route("/mesh/{name}", get(mesh))
+        .fallback(|| async {
+            Reply::NotFound("no such route (/, /info, /query, /scene, /recorded-walk, /mesh/…)".into())
+        })
+        .layer(middleware::from_fn(only_small_gets))
+        .layer(RequestBodyLimitLayer::new(1024))
+        .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, timeout))
+        .layer(tower::limit::ConcurrencyLimitLayer::new(concurrency))
+        .with_state(served)
+}
+
+/// GET and HEAD only, with a bounded request target.
+async fn only_small_gets(request: Request, next: Next) -> Response {
+    if request.method() != Method::GET && request.method() != Method::HEAD {
+        let mut r =
+            Reply::Status(StatusCode::METHOD_NOT_ALLOWED, "read-only: GET and HEAD only".into()).into_response();
+        r.headers_mut().insert(header::ALLOW, HeaderValue::from_static("GET, HEAD"));
+        return r;
+    }
+    let target = request.uri().path_and_query().map_or(0, |p| p.as_str().len());
+    if target > MAX_TARGET {
+        return Reply::Status(
+            StatusCode::URI_TOO_LONG,
+            format!("the request target is {target} bytes; at most {MAX_TARGET} are served"),
+        )
+        .into_response();
+    }
+    next.run(request).await
+}
+
+async fn asset(content_type: &'static str, bytes: &'static [u8]) -> Response {
+    ([(header::CONTENT_TYPE, content_type), (header::CACHE_CONTROL, "no-cache")], bytes).into_response()
+}
+
+/// An answer to a request that failed: its status and one line.
+enum Reply {
+    Bad(String),
+    NotFound(String),
+    Status(StatusCode, String),
+}
+
+impl IntoResponse for Reply {
+    fn into_response(self) -> Response {
+        let (status, error) = match self {
+            Reply::Bad(e) => (StatusCode::BAD_REQUEST, e),
+            Reply::NotFound(e) => (StatusCode::NOT_FOUND, e),
+            Reply::Status(s, e) => (s, e),
+        };
+        (status, axum::Json(json!({ "error": error }))).into_response()
+    }
+}
+
+/// The library's error as a reply: a bad parameter is the client's (named as the request names
+/// it); anything else is the database's, a 500.
+fn reply(e: Error) -> Reply {
+    match e {
+        Error::BadParam { param, reason } => Reply::Bad(format!("{}: {reason}", key_of(param))),
+        e => Reply::Status(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}
+
+/// The query key that sets a library parameter.
+fn key_of(param: Param) -> &'static str {
+    match param {
+        Param::Camera => "look",
+        p => p.name(),
+    }
+}
+
+/// Runs the database work of a request off the async threads.
+async fn blocking<T: Send + 'static>(
+    served: Arc<Served>,
+    work: impl FnOnce(&Served) -> Result<T, Reply> + Send + 'static,
+) -> Result<T, Reply> {
+    tokio::task::spawn_blocking(move || work(&served))
+        .await
+        .unwrap_or_else(|e| Err(Reply::Status(StatusCode::INTERNAL_SERVER_ERROR, format!("request failed: {e}"))))
+}
+
+/// `key=value` pairs of a query string, each key at most once and one of `known`.
+fn pairs(raw: Option<String>, known: &[&str]) -> Result<HashMap<String, String>, Reply> {
+    let list: Vec<(String, String)> = serde_urlencoded::from_str(raw.as_deref().unwrap_or(""))
+        .map_err(|e| Reply::Bad(format!("malformed query string: {e}")))?;
+    let mut out = HashMap::new();
+    for (k, v) in list {
+        if !known.contains(&k.as_str()) {
+            return Err(Reply::Bad(format!("unknown parameter '{k}' ({})", known.join(", "))));
+        }
+        if out.insert(k.clone(), v).is_some() {
+            return Err(Reply::Bad(format!("parameter '{k}' given twice")));
+        }
+    }
+    Ok(out)
+}
+
+/// The value of `key` parsed by `parse`, its error prefixed by the key.
+fn value<T>(
+    p: &HashMap<String, String>,
+    key: &str,
+    parse: impl FnOnce(&str) -> Result<T, String>,
+) -> Result<Option<T>, Reply> {
+    p.get(key).map(|v| parse(v).map_err(|r| Reply::Bad(format!("{key}: {r}")))).transpose()
+}
+
+fn number<T: std::str::FromStr>(what: &'static str) -> impl Fn(&str) -> Result<T, String> {
+    move |s| s.parse::<T>().map_err(|_| format!("'{s}' is not {what}"))
+}
+
+async fn info(State(s): State<Arc<Served>>) -> Result<axum::Json<Value>, Reply> {
+    blocking(s, |s| {
+        let info = s.db.info().map_err(reply)?;
+        Ok(axum::Json(serde_json::to_value(info).expect("serialisable")))
+    })
+    .await
+}
+
+const QUERY_KEYS: &[&str] = &["at", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
+
+async fn query(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
+    let p = pairs(raw, QUERY_KEYS)?;
+    let at = value(&p, "at", parse_vec3)?.ok_or_else(|| Reply::Bad("at: missing (at=X,Y,Z)".into()))?;
+    let look = value(&p, "look", parse_vec3)?;
+    let fov = value(&p, "fov", number::<f32>("a number of degrees"))?;
+    let defaults = QueryParams::default();
+    let params = QueryParams {
+        mode: value(&p, "mode", str::parse::<Mode>)?.unwrap_or(defaults.mode),
+        eta: value(&p, "eta", number::<f64>("a number"))?.unwrap_or(defaults.eta),
+        budget: value(&p, "budget", number::<u64>("a count of faces"))?.unwrap_or(defaults.budget),
+        tau: value(&p, "tau", number::<f64>("a number of pixels"))?.unwrap_or(defaults.tau),
+        lod_rule: value(&p, "lod_rule", str::parse::<LodRule>)?.unwrap_or(defaults.lod_rule),
+        layout: value(&p, "layout", |s| s.parse::<LayoutKind>().map_err(|e| e.to_string()))?,
+        camera: look.map(|look| Camera { look, fov_y_deg: fov.unwrap_or(60.0), ..Camera::default() }),
+    };
+    blocking(s, move |s| {
+        let answer = s.db.query(at, &params).map_err(reply)?;
+        let served = ServedAnswer {
+            at: answer.at,
+            cell: answer.cell,
+            cell_id: answer.cell_id,
+            mode: answer.mode,
+            eta: answer.eta,
+            layout: answer.layout.map(|k| k.to_string()),
+            items: answer.items.iter().map(|i| ServedItem::of(s, i)).collect(),
+            stats: answer.stats,
+            warnings: &answer.warnings,
+        };
+        Ok(json_response(&served))
+    })
+    .await
+}
+
+/// [`hdov::Answer`] as `hdov query --json` writes it, each item with what a client needs to draw
+/// it (the route's test checks that the keys stay the library's).
+#[derive(Serialize)]
+struct ServedAnswer<'a> {
+    at: [f32; 3],
+    cell: [u32; 3],
+    cell_id: u32,
+    mode: Mode,
+    eta: f64,
+    layout: Option<String>,
+    items: Vec<ServedItem<'a>>,
+    stats: hdov::QueryStats,
+    warnings: &'a [String],
+}
+
+/// An item, the URL of its level and the matrix to draw it under (objects only: nodes' internal
+/// LODs are stored in world space).
+#[derive(Serialize)]
+struct ServedItem<'a> {
+    #[serde(flatten)]
+    item: &'a Item,
+    mesh: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    transform: Option<[f32; 16]>,
+}
+
+impl<'a> ServedItem<'a> {
+    fn of(s: &Served, item: &'a Item) -> ServedItem<'a> {
+        let crc = s.lods.get(&item.lod_ref.offset).map_or(0, |&(_, crc)| crc);
+        let m = s.db.item_transform(item);
+        ServedItem {
+            item,
+            mesh: format!("/mesh/{}-{crc:08x}.glb", item.lod_ref.offset),
+            transform: (m != glam::Mat4::IDENTITY).then(|| m.to_cols_array()),
+        }
+    }
+}
+
+/// `value` as a JSON response, serialised once.
+fn json_response(value: &impl Serialize) -> Response {
+    let body = serde_json::to_vec(value).expect("serialisable");
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+}
+
+async fn scene(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
+    let p = pairs(raw, &["lod"])?;
+    let lod = value(&p, "lod", number::<u32>("a level"))?.unwrap_or(0);
+    blocking(s, move |s| {
+        let items = hdov::scene_items(&s.db, lod).map_err(reply)?;
+        let items: Vec<ServedItem> = items.iter().map(|i| ServedItem::of(s, i)).collect();
+        Ok(json_response(&json!({ "items": items })))
+    })
+    .await
+}
+
+async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<axum::Json<Value>, Reply> {
+    let p = pairs(raw, &["kind", "steps"])?;
+    let kind = value(&p, "kind", str::parse::<WalkKind>)?.unwrap_or(WalkKind::Turning);
+    let steps = value(&p, "steps", number::<u32>("a count"))?.unwrap_or(300);
+    if !(1..=MAX_WALK_STEPS).contains(&steps) {
+        return Err(Reply::Bad(format!("steps: {steps} is outside 1..={MAX_WALK_STEPS}")));
+    }
+    let grid = *s.db.grid().expect("checked at start");
+    let path = hdov::city::walk(&grid, kind, steps as usize);
+    let steps: Vec<Value> =
+        path.iter().map(|(at, look): &(Vec3, Vec3)| json!({ "at": at.to_array(), "look": look.to_array() })).collect();
+    Ok(axum::Json(json!({ "kind": kind.name(), "steps": steps })))
+}
+
+async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: HeaderMap) -> Result<Response, Reply> {
+    let unknown = || Reply::NotFound(format!("no stored LOD '{name}' (mesh URLs come from /query)"));
+    // `{offset}-{crc}.glb`, in exactly the form /query writes it.
+    let (offset, crc) = name.strip_suffix(".glb").and_then(|n| n.split_once('-')).ok_or_else(unknown)?;
+    let offset: u64 = offset.parse().ok().filter(|o: &u64| o.to_string() == offset).ok_or_else(unknown)?;
+    let &(lod, stored) = s.lods.get(&offset).ok_or_else(unknown)?;
+    if crc != format!("{stored:08x}") {
+        return Err(unknown());
+    }
+    let etag = format!("\"{offset:x}-{stored:08x}\"");
+    let cache = [(header::ETAG, etag.clone()), (header::CACHE_CONTROL, "public, max-age=31536000, immutable".into())];
+    let matches = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"));
+    if matches {
+        return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
+    }
+    let bytes = blocking(s, move |s| hdov::lod_glb(&s.db, &lod).map_err(reply)).await?;
+    Ok((cache, [(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response())
+}

@@ -1,0 +1,255 @@
+//! Loads `hdov serve` with concurrent clients over loopback and reports throughput, latency per
+//! route, peak RSS and errors; every answer is checked against `Database::query` and every mesh
+//! against `hdov::lod_glb` (outside the timed part of each request).
+//!
+//! ```sh
+//! cargo run --release -p hdov-tools --bin serve-load -- DB [--clients 32] [--requests 20000] [--out OUT.csv] [--no-check]
+//! ```
+//!
+//! The checks (`Database::query` and `lod_glb` again, in the client) share the machine's cores
+//! with the server; `--no-check` leaves them out to time the server alone.
+//!
+//! It starts `target/release/hdov serve DB --addr 127.0.0.1:0` itself. Each client holds one
+//! keep-alive connection and repeats: a point query at a random viewpoint of the grid (seeded),
+//! then a fetch of one mesh the answer names. REQUESTS counts both (default 20,000 with 32
+//! clients). RSS is the server's, read from /proc: idle after start-up, and its peak (VmHWM).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use hdov::{Database, QueryParams};
+
+/// One keep-alive HTTP/1.1 connection.
+struct Client {
+    reader: BufReader<TcpStream>,
+}
+
+impl Client {
+    fn connect(addr: SocketAddr) -> Client {
+        let s = TcpStream::connect(addr).expect("connects");
+        s.set_nodelay(true).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        Client { reader: BufReader::new(s) }
+    }
+
+    /// `(status, body)` of `GET target`.
+    fn get(&mut self, target: &str) -> (u16, Vec<u8>) {
+        write!(self.reader.get_mut(), "GET {target} HTTP/1.1\r\nHost: load\r\n\r\n").unwrap();
+        let mut line = String::new();
+        self.reader.read_line(&mut line).unwrap();
+        let status: u16 = line.split_whitespace().nth(1).and_then(|s| s.parse().ok()).expect("a status line");
+        let mut len = 0usize;
+        loop {
+            line.clear();
+            self.reader.read_line(&mut line).unwrap();
+            if line == "\r\n" {
+                break;
+            }
+            if let Some((k, v)) = line.split_once(':')
+                && k.eq_ignore_ascii_case("content-length")
+            {
+                len = v.trim().parse().unwrap();
+            }
+        }
+        let mut body = vec![0; len];
+        self.reader.read_exact(&mut body).unwrap();
+        (status, body)
+    }
+}
+
+/// The server's resident set: (current, peak) in kB.
+fn rss(pid: u32) -> (u64, u64) {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let field = |name: &str| {
+        status
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+/// xorshift64*: a seeded stream of viewpoints, the same every run.
+fn next(state: &mut u64) -> f32 {
+    *state ^= *state >> 12;
+    *state ^= *state << 25;
+    *state ^= *state >> 27;
+    (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// The items of an answer as the checks compare them: kind, id, level and DoV.
+fn items_of(v: &serde_json::Value) -> Vec<(String, u64, u64, u32)> {
+    v["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| {
+            (
+                i["kind"].as_str().unwrap().to_string(),
+                i["id"].as_u64().unwrap(),
+                i["lod"].as_u64().unwrap(),
+                // f32 written as its shortest decimal: parsed back to the same f32.
+                (i["dov"].as_f64().unwrap() as f32).to_bits(),
+            )
+        })
+        .collect()
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(db_dir) = args.first().filter(|a| !a.starts_with("--")).map(PathBuf::from) else {
+        eprintln!("usage: serve-load DB [--clients N] [--requests N] [--out OUT.csv] [--no-check]");
+        std::process::exit(2);
+    };
+    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1));
+    let clients: usize = flag("--clients").map_or(32, |s| s.parse().expect("--clients N"));
+    let requests: usize = flag("--requests").map_or(20_000, |s| s.parse().expect("--requests N"));
+    let out = flag("--out");
+    let check = !args.iter().any(|a| a == "--no-check");
+    let db = Database::open(&db_dir).expect("opens");
+    let grid = *db.grid().expect("a grid");
+    let hdov = std::env::current_exe().unwrap().with_file_name("hdov");
+    let mut server = Command::new(&hdov)
+        .args(["serve", db_dir.to_str().unwrap(), "--addr", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{}: {e} (cargo build --release first)", hdov.display()));
+    let mut line = String::new();
+    BufReader::new(server.stdout.as_mut().unwrap()).read_line(&mut line).unwrap();
+    let addr: SocketAddr =
+        line.split_whitespace().nth(2).unwrap().trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let idle = rss(server.id()).0;
+
+    let done = AtomicUsize::new(0);
+    let errors = AtomicUsize::new(0);
+    let start = Instant::now();
+    let per_client: Vec<(Vec<f64>, Vec<f64>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..clients)
+            .map(|c| {
+                let (db, grid, done, errors) = (&db, &grid, &done, &errors);
+                s.spawn(move || {
+                    let mut client = Client::connect(addr);
+                    let mut seed = 0x9e37_79b9_7f4a_7c15u64 ^ (c as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+                    let (mut queries, mut meshes) = (Vec::new(), Vec::new());
+                    while done.fetch_add(2, Ordering::Relaxed) < requests {
+                        let r = grid.region;
+                        let at = r.min + (r.max - r.min) * Vec3::new(next(&mut seed), next(&mut seed), next(&mut seed));
+                        let t = Instant::now();
+                        let (status, body) = client.get(&format!("/query?at={},{},{}", at.x, at.y, at.z));
+                        queries.push(t.elapsed().as_secs_f64() * 1e3);
+                        let answer: serde_json::Value = serde_json::from_slice(&body).unwrap_or_default();
+                        if status != 200 {
+                            errors.fetch_add(1, Ordering::Relaxed);
+                            continue;
+                        }
+                        let items = answer["items"].as_array().map_or(&[][..], Vec::as_slice);
+                        if !check {
+                            if items.is_empty() {
+                                continue;
+                            }
+                            let k = (next(&mut seed) * items.len() as f32) as usize % items.len();
+                            let t = Instant::now();
+                            let (status, _) = client.get(items[k]["mesh"].as_str().unwrap_or("/"));
+                            meshes.push(t.elapsed().as_secs_f64() * 1e3);
+                            if status != 200 {
+                                errors.fetch_add(1, Ordering::Relaxed);
+                            }
+                            continue;
+                        }
+                        let expected = db.query(at, &QueryParams::default()).expect("the library answers");
+                        let expected_items: Vec<_> = expected
+                            .items
+                            .iter()
+                            .map(|i| {
+                                let kind = if i.kind == hdov::ItemKind::Node { "node" } else { "object" };
+                                (kind.to_string(), u64::from(i.id), u64::from(i.lod), i.dov.to_bits())
+                            })
+                            .collect();
+                        if items_of(&answer) != expected_items {
+                            errors.fetch_add(1, Ordering::Relaxed);
+                            continue;
+                        }
+                        let Some(k) = (!expected.items.is_empty())
+                            .then(|| (next(&mut seed) * expected.items.len() as f32) as usize % expected.items.len())
+                        else {
+                            continue;
+                        };
+                        let url = answer["items"][k]["mesh"].as_str().unwrap().to_string();
+                        let t = Instant::now();
+                        let (status, body) = client.get(&url);
+                        meshes.push(t.elapsed().as_secs_f64() * 1e3);
+                        if status != 200 || body != hdov::lod_glb(db, &expected.items[k].lod_ref).unwrap() {
+                            errors.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                    (queries, meshes)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let wall = start.elapsed().as_secs_f64();
+    let (_, peak) = rss(server.id());
+    // SAFETY: signalling our own child process.
+    unsafe { libc::kill(server.id() as i32, libc::SIGTERM) };
+    let _ = server.wait();
+
+    let mut queries: Vec<f64> = per_client.iter().flat_map(|c| c.0.iter().copied()).collect();
+    let mut meshes: Vec<f64> = per_client.iter().flat_map(|c| c.1.iter().copied()).collect();
+    queries.sort_by(f64::total_cmp);
+    meshes.sort_by(f64::total_cmp);
+    let total = queries.len() + meshes.len();
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!("{} clients, {total} requests in {wall:.2} s: {:.0} requests/s", clients, total as f64 / wall);
+    println!(
+        "query: {} requests, p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        queries.len(),
+        percentile(&queries, 0.5),
+        percentile(&queries, 0.99),
+        queries.last().copied().unwrap_or(f64::NAN)
+    );
+    println!(
+        "mesh:  {} requests, p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        meshes.len(),
+        percentile(&meshes, 0.5),
+        percentile(&meshes, 0.99),
+        meshes.last().copied().unwrap_or(f64::NAN)
+    );
+    println!(
+        "server RSS: idle {} MB, peak {} MB ({:.2}x); errors {}; load average {}",
+        idle / 1024,
+        peak / 1024,
+        peak as f64 / idle.max(1) as f64,
+        errors.load(Ordering::Relaxed),
+        load.split_whitespace().take(3).collect::<Vec<_>>().join(" ")
+    );
+    println!("answers checked against the library: {}", if check { "yes" } else { "no (--no-check)" });
+    if let Some(out) = out {
+        let mut csv = String::from("route,latency_ms\n");
+        for (route, list) in [("query", &queries), ("mesh", &meshes)] {
+            for l in list.iter() {
+                csv += &format!("{route},{l:.4}\n");
+            }
+        }
+        std::fs::write(Path::new(out), csv).unwrap();
+        println!("wrote {out}");
+    }
+    if errors.load(Ordering::Relaxed) > 0 {
+        std::process::exit(1);
+    }
+}
