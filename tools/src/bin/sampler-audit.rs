@@ -34,7 +34,6 @@ use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
-use hdov::scene::Scene;
 use hdov_testkit::audit::{DENSE_HALTON_START, dense_cells};
 
 /// One row of the table: a way of sampling.
@@ -83,35 +82,6 @@ impl Sampler {
         }
         o
     }
-}
-
-/// A picket fence in front of small objects, sized in texels of a cube map of resolution `r` seen
-/// from the grid's middle: bars 0.25, 0.5, 1, 2, 4, 8 texels wide (cycled), gaps 0.5–4 bars wide,
-/// 10 units from the grid's far edge; behind it 40 posts and boxes, 0.1–0.8 wide, then a back
-/// wall. The ground is a slab. Returns the scene and its grid (4 × 1 × 4 cells of 2 × 0.5 × 2).
-fn fence_scene(r: u32) -> (Scene, ViewGrid) {
-    let mut b = hdov_testkit::scenes::SceneBuilder::default();
-    b.aabox(Vec3::new(-30.0, -1.0, -10.0), Vec3::new(40.0, 0.0, 50.0));
-    let grid = ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.5, 0.0), Vec3::new(8.0, 2.0, 8.0)), [4, 1, 4]);
-    let fence_z = 18.0;
-    // One texel at the face centre, seen from the grid's middle (z = 4): 2/R radians.
-    let texel = (fence_z - 4.0) * 2.0 / r as f32;
-    let widths = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
-    let mut rng = hdov_testkit::scenes::Rng(7);
-    let (mut x, mut i) = (-20.0f32, 0);
-    while x < 28.0 {
-        let w = widths[i % widths.len()] * texel;
-        b.aabox(Vec3::new(x, 0.0, fence_z), Vec3::new(x + w, 3.0, fence_z + 0.05));
-        x += w + rng.range(0.5, 4.0) * w.max(texel);
-        i += 1;
-    }
-    for _ in 0..40 {
-        let (px, pz) = (rng.range(-15.0, 23.0), rng.range(fence_z + 1.0, fence_z + 14.0));
-        let (w, h) = (rng.range(0.1, 0.8), rng.range(0.5, 2.8));
-        b.aabox(Vec3::new(px, 0.0, pz), Vec3::new(px + w, h, pz + w));
-    }
-    b.aabox(Vec3::new(-30.0, 0.0, fence_z + 16.0), Vec3::new(40.0, 5.0, fence_z + 16.5));
-    (b.build(), grid)
 }
 
 /// Each object its own leaf under one root: the samplers' object entries do not depend on the
@@ -199,7 +169,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             hdov_testkit::scenes::city_block(6, true),
             ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
         ),
-        "fence" => fence_scene(r),
+        "fence" => hdov_testkit::scenes::picket_fence(r),
         "city" => {
             let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
             let grid = scene.grid.ok_or("the city brings a grid")?;

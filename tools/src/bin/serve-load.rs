@@ -3,13 +3,14 @@
 //! against `hdov::lod_glb` (outside the timed part of each request).
 //!
 //! ```sh
-//! cargo run --release -p hdov-tools --bin serve-load -- DB [--clients 32] [--requests 20000] [--out OUT.csv] [--no-check]
+//! cargo run --release -p hdov-tools --bin serve-load -- DB [--clients 32] [--requests 20000] [--out OUT.csv] [--no-check] [--hdov PATH]
 //! ```
 //!
 //! The checks (`Database::query` and `lod_glb` again, in the client) share the machine's cores
 //! with the server; `--no-check` leaves them out to time the server alone.
 //!
-//! It starts `target/release/hdov serve DB --addr 127.0.0.1:0` itself. Each client holds one
+//! It starts `hdov serve DB --addr 127.0.0.1:0` itself (`--hdov`, default: the `hdov` beside this
+//! program, `target/release/hdov`). Each client holds one
 //! keep-alive connection and repeats: a point query at a random viewpoint of the grid (seeded),
 //! then a fetch of one mesh the answer names. REQUESTS counts both (default 20,000 with 32
 //! clients). RSS is the server's, read from /proc: idle after start-up, and its peak (VmHWM).
@@ -112,7 +113,7 @@ fn items_of(v: &serde_json::Value) -> Vec<(String, u64, u64, u32)> {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(db_dir) = args.first().filter(|a| !a.starts_with("--")).map(PathBuf::from) else {
-        eprintln!("usage: serve-load DB [--clients N] [--requests N] [--out OUT.csv] [--no-check]");
+        eprintln!("usage: serve-load DB [--clients N] [--requests N] [--out OUT.csv] [--no-check] [--hdov PATH]");
         std::process::exit(2);
     };
     let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1));
@@ -122,7 +123,7 @@ fn main() {
     let check = !args.iter().any(|a| a == "--no-check");
     let db = Database::open(&db_dir).expect("opens");
     let grid = *db.grid().expect("a grid");
-    let hdov = std::env::current_exe().unwrap().with_file_name("hdov");
+    let hdov = flag("--hdov").map_or_else(|| std::env::current_exe().unwrap().with_file_name("hdov"), PathBuf::from);
     let mut server = Command::new(&hdov)
         .args(["serve", db_dir.to_str().unwrap(), "--addr", "127.0.0.1:0"])
         .stdout(Stdio::piped())

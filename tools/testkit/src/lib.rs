@@ -5,9 +5,11 @@
 //! - [`scenes`]: scenes built in code (spheres, boxes, walls with holes, a city block, a town);
 //! - [`gpu`]: skipping GPU tests where no adapter exists, unless CI requires one;
 //! - [`audit`]: the DoV audits (backend agreement, the dense from-region reference, floor tests);
-//! - [`bench`]: the query benchmarks' database fixture and viewpoints.
+//! - [`bench`]: the query benchmarks' database fixture and viewpoints;
+//! - [`view_error`]: from-region error as a user sees it (wrong share of a view, per frame).
 
 pub mod audit;
 pub mod bench;
 pub mod gpu;
 pub mod scenes;
+pub mod view_error;

@@ -1,6 +1,8 @@
 //! Scenes built in code for the DoV tests: tessellated spheres, boxes, walls with holes.
 
 use glam::{Mat4, Vec3};
+use hdov::geom::Aabb;
+use hdov::grid::ViewGrid;
 use hdov::scene::{BaseMesh, Mesh, Object, Scene};
 
 /// An icosphere of radius 1 around the origin, `subdivisions` times refined (20·4^s triangles),
@@ -232,4 +234,87 @@ pub fn town(n: usize, ball_subdivisions: u32) -> Scene {
         }
     }
     scene
+}
+
+/// A street as issue 22 describes it, with its grid: a row of houses on each side with 1 m gaps
+/// between them, yards behind with sheds, then a second row of houses; poles along the kerbs; a
+/// slatted fence (0.1 m slats, 0.15 m gaps) in front of a yard on the south side. The grid is
+/// 18 cells of 5 × 0.5 × 2 m along the street's middle at eye height: from part of a cell a
+/// house in the second row shows through a gap, from the rest it does not.
+pub fn street_with_gaps() -> (Scene, ViewGrid) {
+    let mut b = SceneBuilder::default();
+    let mut rng = Rng(22);
+    b.aabox(Vec3::new(-20.0, -1.0, -45.0), Vec3::new(110.0, 0.0, 50.0));
+    let row = |b: &mut SceneBuilder, rng: &mut Rng, z0: f32, z1: f32, x0: f32| {
+        let mut x = x0;
+        while x < 95.0 {
+            let w = rng.range(6.0, 10.0);
+            b.aabox(Vec3::new(x, 0.0, z0), Vec3::new(x + w, rng.range(6.0, 15.0), z1));
+            x += w + 1.0;
+        }
+    };
+    // North: the first row, yards with sheds, the second row (offset, so gaps do not line up).
+    row(&mut b, &mut rng, 9.0, 19.0, -5.0);
+    for _ in 0..24 {
+        let (x, z, w) = (rng.range(-5.0, 95.0), rng.range(20.0, 30.0), rng.range(0.8, 2.5));
+        b.aabox(Vec3::new(x, 0.0, z), Vec3::new(x + w, rng.range(1.0, 2.5), z + w));
+    }
+    row(&mut b, &mut rng, 32.0, 42.0, -1.5);
+    // South: houses, except a yard behind a slatted fence from x = 30 to 55.
+    for (x0, x1) in [(-5.0f32, 30.0f32), (55.0, 95.0)] {
+        let mut x = x0;
+        while x < x1 {
+            let w = rng.range(6.0, 9.0).min(x1 - x);
+            b.aabox(Vec3::new(x, 0.0, -14.0), Vec3::new(x + w, rng.range(6.0, 15.0), -4.0));
+            x += w + 1.0;
+        }
+    }
+    let mut x = 30.0;
+    while x < 55.0 {
+        b.aabox(Vec3::new(x, 0.0, -1.05), Vec3::new(x + 0.1, 1.8, -1.0));
+        x += 0.25;
+    }
+    for _ in 0..12 {
+        let (x, z, w) = (rng.range(30.0, 54.0), rng.range(-12.0, -3.0), rng.range(0.5, 2.0));
+        b.aabox(Vec3::new(x, 0.0, z), Vec3::new(x + w, rng.range(0.8, 3.0), z + w));
+    }
+    b.aabox(Vec3::new(28.0, 0.0, -30.0), Vec3::new(57.0, 9.0, -20.0));
+    // Poles along both kerbs.
+    for k in 0..10 {
+        for z in [-0.5f32, 8.0] {
+            let x = k as f32 * 9.5 + rng.range(0.0, 3.0);
+            b.aabox(Vec3::new(x, 0.0, z), Vec3::new(x + 0.2, 5.0, z + 0.2));
+        }
+    }
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.5, 3.0), Vec3::new(90.0, 2.0, 5.0)), [18, 1, 1]);
+    (b.build(), grid)
+}
+
+/// A picket fence in front of small objects, sized in texels of a cube map of resolution `r` seen
+/// from the grid's middle: bars 0.25, 0.5, 1, 2, 4, 8 texels wide (cycled), gaps 0.5–4 bars wide,
+/// 10 units from the grid's far edge; behind it 40 posts and boxes, 0.1–0.8 wide, then a back
+/// wall. The ground is a slab. Returns the scene and its grid (4 × 1 × 4 cells of 2 × 0.5 × 2).
+pub fn picket_fence(r: u32) -> (Scene, ViewGrid) {
+    let mut b = SceneBuilder::default();
+    b.aabox(Vec3::new(-30.0, -1.0, -10.0), Vec3::new(40.0, 0.0, 50.0));
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(0.0, 1.5, 0.0), Vec3::new(8.0, 2.0, 8.0)), [4, 1, 4]);
+    let fence_z = 18.0;
+    // One texel at the face centre, seen from the grid's middle (z = 4): 2/R radians.
+    let texel = (fence_z - 4.0) * 2.0 / r as f32;
+    let widths = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
+    let mut rng = Rng(7);
+    let (mut x, mut i) = (-20.0f32, 0);
+    while x < 28.0 {
+        let w = widths[i % widths.len()] * texel;
+        b.aabox(Vec3::new(x, 0.0, fence_z), Vec3::new(x + w, 3.0, fence_z + 0.05));
+        x += w + rng.range(0.5, 4.0) * w.max(texel);
+        i += 1;
+    }
+    for _ in 0..40 {
+        let (px, pz) = (rng.range(-15.0, 23.0), rng.range(fence_z + 1.0, fence_z + 14.0));
+        let (w, h) = (rng.range(0.1, 0.8), rng.range(0.5, 2.8));
+        b.aabox(Vec3::new(px, 0.0, pz), Vec3::new(px + w, h, pz + w));
+    }
+    b.aabox(Vec3::new(-30.0, 0.0, fence_z + 16.0), Vec3::new(40.0, 5.0, fence_z + 16.5));
+    (b.build(), grid)
 }

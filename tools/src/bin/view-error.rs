@@ -1,0 +1,321 @@
+//! From-region error as users see it (issue 22): builds a scene's database with each sampler,
+//! then, at random viewpoints inside its cells, measures how much of the whole scene's view the
+//! cell's answer lacks.
+//!
+//! ```sh
+//! cargo run --release -p hdov-tools --bin view-error -- SCENE [--samplers corners,probe] [--viewpoints 8]
+//!     [--seed 1] [--resolution 128] [--truth 256] [--cells N] [--frames] [--out OUT.csv] [--chart OUT.svg]
+//! ```
+//!
+//! SCENE: `street` (issue 22's street: 1 m gaps, yards, poles, a slatted fence; 18 cells of
+//! 5 × 0.5 × 2 m), `audit` (the street block of tests/dov_audit.rs), `fence` (the picket fence of
+//! `sampler-audit`) or `city` (the default city; `--cells N` takes N of its cells, seeded).
+//!
+//! - **Builds**: one per sampler (`--samples` syntax), with the CPU backend at `--resolution` and
+//!   the command's default floors; the visibility stage's seconds come from the manifest.
+//! - **Viewpoints**: `--viewpoints` per cell, uniformly random strictly inside it (seeded; never a
+//!   corner or a Halton point), redrawn where the truth finds them inside geometry.
+//! - **Truth**: a full id cube map of the whole scene at `--truth` texels per edge, by the other
+//!   tracer: the GPU backend (wgpu) where an adapter exists, else the CPU backend, flagged as the
+//!   same tracer.
+//! - **Wrong share**: the solid angle of texels whose object the cell's naive answer lacks, over
+//!   the solid angle of all texels that show an object. With `--frames`, also GVS++'s per-frame
+//!   error: a 1024 × 1024 frame at 45°, looking in a random direction, drawn by hdov's renderer
+//!   (pixels of absent objects over pixels that show one).
+//! - **Stored DoV error**: the share of (viewpoint, object) pairs whose point DoV exceeds the
+//!   cell's stored DoV by more than 2 texels (of the build's R) plus 1 %. Reported only.
+//!
+//! Prints a table per sampler (mean, p99, max, viewpoints with any wrong texel, the objects
+//! behind the worst ones); writes a CSV row per (sampler, viewpoint) and a chart of mean error
+//! against visibility time.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use glam::Vec3;
+use hdov::city::{CityParams, CityScale};
+use hdov::dov::sampling::is_inside;
+use hdov::dov::{DovBackend, IdCube};
+use hdov::grid::ViewGrid;
+use hdov::render::{ColorMode, NO_ITEM, Renderer, View};
+use hdov::scene::Scene;
+use hdov::{BackendKind, BuildParams, Database, FloorTest, Mode, Overwrite, Progress, QueryParams, Sampling};
+use hdov::{ItemKind, VisibilityParams};
+use hdov_testkit::view_error::{SplitRng, dov_excess, frame_error, quantile, random_viewpoint, wrong_share};
+use hdov_tools::experiments::charts::{Panel, Series, write_svg};
+
+/// What the truth sees from one viewpoint.
+struct Viewpoint {
+    cell: usize,
+    at: Vec3,
+    /// Solid angle per object seen, and in all.
+    solid: HashMap<u32, f64>,
+    seen: f64,
+    /// Point DoV per object (for the stored-DoV check).
+    point: hdov::PointDov,
+    /// Pixels per object of the random frame (with `--frames`).
+    frame: Option<HashMap<u32, usize>>,
+}
+
+/// One sampler's results.
+struct Row {
+    sampler: String,
+    seconds: f64,
+    shares: Vec<f64>,
+    frames: Vec<f64>,
+    excess: (usize, usize),
+    worst: Vec<Worst>,
+}
+
+/// A viewpoint's wrong share, its index, and the lacking objects behind it (name, share).
+type Worst = (f64, usize, Vec<(String, f64)>);
+
+fn scene_of(name: &str, r: u32) -> Result<(Scene, ViewGrid), String> {
+    Ok(match name {
+        "street" => hdov_testkit::scenes::street_with_gaps(),
+        "audit" => (
+            hdov_testkit::scenes::city_block(6, true),
+            ViewGrid::new(hdov::Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
+        ),
+        "fence" => hdov_testkit::scenes::picket_fence(r),
+        "city" => {
+            let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })
+                .map_err(|e| e.to_string())?;
+            let grid = scene.grid.ok_or("the city brings a grid")?;
+            (scene, grid)
+        }
+        other => return Err(format!("unknown scene '{other}': street, audit, fence or city")),
+    })
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).cloned();
+    let scene_name = args.first().filter(|a| !a.starts_with("--")).cloned().unwrap_or_else(|| "street".into());
+    let samplers: Vec<String> =
+        flag("--samplers").unwrap_or_else(|| "corners,probe".into()).split(',').map(str::to_string).collect();
+    let per_cell: usize = flag("--viewpoints").map_or(Ok(8), |s| s.parse())?;
+    let seed: u64 = flag("--seed").map_or(Ok(1), |s| s.parse())?;
+    let r: u32 = flag("--resolution").map_or(Ok(128), |s| s.parse())?;
+    let truth_r: u32 = flag("--truth").map_or(Ok(256), |s| s.parse())?;
+    let frames = args.iter().any(|a| a == "--frames");
+    let (mut scene, grid) = scene_of(&scene_name, r)?;
+    scene.grid = Some(grid);
+    println!("{}", hdov_tools::machine());
+
+    // Cells: all, or a seeded subset.
+    let mut rng = SplitRng::new(seed);
+    let mut cells: Vec<usize> = (0..grid.cell_count()).collect();
+    if let Some(n) = flag("--cells").map(|s| s.parse::<usize>()).transpose()? {
+        for i in (1..cells.len()).rev() {
+            cells.swap(i, (rng.next_f64() * (i + 1) as f64) as usize);
+        }
+        cells.truncate(n);
+        cells.sort_unstable();
+    }
+
+    // The truth, by the tracer the builds do not use.
+    let (mut truth, same): (Box<dyn DovBackend>, bool) =
+        match hdov::open_backend(&scene, truth_r, BackendKind::Gpu, &Default::default()) {
+            Ok(b) => (b, false),
+            Err(e) => {
+                println!("truth: no GPU backend ({e}); the CPU backend, the builds' own tracer");
+                (hdov::open_backend(&scene, truth_r, BackendKind::Cpu, &Default::default())?, true)
+            }
+        };
+    println!("truth: {} at R = {truth_r}{}", truth.name(), if same { " (same tracer as the builds)" } else { "" });
+    let cube = truth.cube_map().clone();
+    let mut ids = IdCube::new(truth_r);
+    let mut views = Vec::new();
+    for &cell in &cells {
+        let cell_box = grid.cell_box(grid.cell_coords(cell));
+        let mut kept = 0;
+        for _ in 0..per_cell * 20 {
+            if kept == per_cell {
+                break;
+            }
+            let at = random_viewpoint(&cell_box, &mut rng);
+            truth.render_ids(at, &mut ids)?;
+            let point = ids.dov(&cube);
+            if is_inside(&point) {
+                continue;
+            }
+            let all = wrong_share(&ids, &cube, |_| false);
+            views.push(Viewpoint {
+                cell,
+                at,
+                solid: all.missing.into_iter().collect(),
+                seen: all.seen,
+                point,
+                frame: None,
+            });
+            kept += 1;
+        }
+    }
+    println!(
+        "{scene_name}: {} objects, {} of {} cells, {} viewpoints",
+        scene.objects.len(),
+        cells.len(),
+        grid.cell_count(),
+        views.len()
+    );
+
+    let tmp = tempfile::tempdir()?;
+    let mut rows: Vec<Row> = Vec::new();
+    for (k, name) in samplers.iter().enumerate() {
+        let sampling: Sampling = name.parse()?;
+        let floors = match sampling {
+            Sampling::Probe(_) => vec![FloorTest::BoxWithin(0.0)],
+            _ => vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
+        };
+        let visibility = VisibilityParams {
+            resolution: r,
+            backend: BackendKind::Cpu,
+            sampling,
+            zero_dov_floor: floors,
+            ..Default::default()
+        };
+        let dir = tmp.path().join(format!("db{k}"));
+        let report = hdov::build(
+            &scene,
+            &dir,
+            &BuildParams { visibility: Some(visibility), ..Default::default() },
+            Overwrite::Never,
+            &Progress::hidden(),
+        )?;
+        let seconds = report.manifest.visibility.as_ref().map_or(f64::NAN, |v| v.seconds);
+        let db = Database::open(&dir)?;
+        if frames && k == 0 {
+            draw_frames(&db, &mut views, seed)?;
+        }
+        let texel = (2.0 / f64::from(r)).powi(2) / (4.0 * std::f64::consts::PI);
+        let naive = QueryParams { mode: Mode::Naive, ..Default::default() };
+        let mut row =
+            Row { sampler: name.clone(), seconds, shares: vec![], frames: vec![], excess: (0, 0), worst: vec![] };
+        for (i, v) in views.iter().enumerate() {
+            let answer = db.query(v.at, &naive)?;
+            let stored: HashMap<u32, f64> = answer
+                .items
+                .iter()
+                .filter(|it| it.kind == ItemKind::Object)
+                .map(|it| (it.id, f64::from(it.dov)))
+                .collect();
+            let wrong: Vec<(u32, f64)> =
+                v.solid.iter().filter(|(o, _)| !stored.contains_key(o)).map(|(&o, &w)| (o, w)).collect();
+            let share = wrong.iter().fold(0.0, |a, w| a + w.1) / v.seen.max(f64::MIN_POSITIVE);
+            row.shares.push(share);
+            if let Some(pixels) = &v.frame {
+                row.frames.push(frame_error(pixels.iter().map(|(&o, &n)| (o, n)), |o| stored.contains_key(&o)));
+            }
+            let (e, n) = dov_excess(&v.point, |o| stored.get(&o).copied().unwrap_or(0.0), texel, 2.0, 0.01);
+            row.excess = (row.excess.0 + e, row.excess.1 + n);
+            let mut named: Vec<(String, f64)> =
+                wrong.iter().map(|&(o, w)| (scene.objects[o as usize].name.clone(), w / v.seen)).collect();
+            named.sort_by(|a, b| b.1.total_cmp(&a.1));
+            named.truncate(3);
+            row.worst.push((share, i, named));
+        }
+        rows.push(row);
+    }
+
+    // The table.
+    let base = rows.first().map_or(1.0, |r| r.seconds);
+    println!(
+        "\n| sampler | visibility s | / {} | mean | p99 | max | viewpoints wrong | frame mean | stored DoV exceeded |",
+        rows.first().map_or("", |r| r.sampler.as_str())
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for row in &mut rows {
+        let mean = row.shares.iter().fold(0.0, |a, s| a + s) / row.shares.len().max(1) as f64;
+        let wrong = row.shares.iter().filter(|&&s| s > 0.0).count();
+        let max = row.shares.iter().copied().fold(0.0, f64::max);
+        let frame = if row.frames.is_empty() {
+            "–".to_string()
+        } else {
+            format!("{:.1e}", row.frames.iter().fold(0.0, |a, f| a + f) / row.frames.len() as f64)
+        };
+        println!(
+            "| {} | {:.2} | {:.2}× | {:.1e} | {:.1e} | {:.1e} | {wrong} of {} | {frame} | {:.2} % |",
+            row.sampler,
+            row.seconds,
+            row.seconds / base,
+            mean,
+            quantile(&mut row.shares.clone(), 0.99),
+            max,
+            row.shares.len(),
+            100.0 * row.excess.0 as f64 / row.excess.1.max(1) as f64
+        );
+    }
+    for row in &mut rows {
+        row.worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for (share, i, named) in row.worst.iter().take(3).filter(|w| w.0 > 0.0) {
+            let v = &views[*i];
+            let list: Vec<String> = named.iter().map(|(n, s)| format!("{n} {s:.1e}")).collect();
+            println!(
+                "  {}: {share:.1e} at cell {} ({:.2}, {:.2}, {:.2}): {}",
+                row.sampler,
+                v.cell,
+                v.at.x,
+                v.at.y,
+                v.at.z,
+                list.join(", ")
+            );
+        }
+    }
+
+    if let Some(out) = flag("--out").map(PathBuf::from) {
+        let mut csv = String::from("scene,sampler,visibility_seconds,cell,x,y,z,wrong_share,frame_error\n");
+        for row in &rows {
+            for (i, v) in views.iter().enumerate() {
+                let frame = row.frames.get(i).map_or(String::new(), |f| format!("{f:.6e}"));
+                csv += &format!(
+                    "{scene_name},{},{:.3},{},{:.3},{:.3},{:.3},{:.6e},{frame}\n",
+                    row.sampler, row.seconds, v.cell, v.at.x, v.at.y, v.at.z, row.shares[i]
+                );
+            }
+        }
+        std::fs::write(&out, csv)?;
+        println!("wrote {}", out.display());
+    }
+    if let Some(chart) = flag("--chart").map(PathBuf::from) {
+        let mut panel = Panel::new(
+            format!("{scene_name}: {} viewpoints", views.len()),
+            "visibility time / the first sampler's",
+            "mean wrong share",
+        )
+        .log_y();
+        for row in &rows {
+            let mean = row.shares.iter().fold(0.0, |a, s| a + s) / row.shares.len().max(1) as f64;
+            panel = panel.with(Series::new(row.sampler.clone(), vec![(row.seconds / base, mean.max(1e-9))]));
+        }
+        write_svg(&chart, "Wrong share of the view against visibility build time", &[panel], 1)?;
+        println!("wrote {}", chart.display());
+    }
+    Ok(())
+}
+
+/// One 1024 × 1024 frame at 45° per viewpoint, looking in a uniformly random direction, drawn by
+/// hdov's renderer from the database's full-detail geometry: pixels per object.
+fn draw_frames(db: &Database, views: &mut [Viewpoint], seed: u64) -> Result<(), Box<dyn std::error::Error>> {
+    let renderer = match Renderer::new() {
+        Ok(r) => r,
+        Err(e) => {
+            println!("frames: skipped ({e})");
+            return Ok(());
+        }
+    };
+    let mut rng = SplitRng::new(seed ^ 0xf4a3e);
+    for v in views.iter_mut() {
+        let z = 2.0 * rng.next_f64() - 1.0;
+        let phi = std::f64::consts::TAU * rng.next_f64();
+        let s = (1.0 - z * z).sqrt();
+        let look = Vec3::new((s * phi.cos()) as f32, z as f32, (s * phi.sin()) as f32);
+        let image = renderer.render_full(db, &View::new(v.at, look, 45.0, 1024, 1024), ColorMode::Shaded)?;
+        let mut pixels: HashMap<u32, usize> = HashMap::new();
+        for &id in image.ids.iter().filter(|&&id| id != NO_ITEM) {
+            *pixels.entry(id).or_default() += 1;
+        }
+        v.frame = Some(pixels);
+    }
+    Ok(())
+}
