@@ -1,0 +1,179 @@
+#!/usr/bin/env bash
+# A sharded build on a real scheduler: a single-node Slurm (munged, slurmctld, slurmd on
+# localhost, as root, without systemd) runs `hdov build --shard $SLURM_ARRAY_TASK_ID/N` as an
+# array job and `hdov merge` as a job that depends on it (afterok); one task is cancelled
+# mid-run and requeued. The merged database must equal a whole build, every data file byte for
+# byte. Prints the wall times of the sharded run and the whole build.
+#
+#   tools/slurm/test-local.sh [HDOV_BINARY] [SCALE] [SHARDS]     (defaults: target/release/hdov small 4)
+#
+# HDOV_SLURM_DEBUG=1 prints the queue every 5 s while the jobs run.
+#
+# Installs Debian's slurm-wlm and munge when missing. If a daemon cannot start it prints why
+# (its log) and exits 1: it never skips. Everything it starts is stopped on exit, and all it
+# writes lies in one temporary folder.
+set -euo pipefail
+
+HDOV=$(realpath "${1:-target/release/hdov}")
+SCALE=${2:-small}
+N=${3:-4}
+[ -x "$HDOV" ] || { echo "slurm test: $HDOV is not an executable (cargo build --release first)"; exit 1; }
+[ "$(id -u)" -eq 0 ] || { echo "slurm test: the daemons are started as root; run it as root"; exit 1; }
+
+if ! command -v slurmctld >/dev/null 2>&1 || ! command -v munged >/dev/null 2>&1; then
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq slurm-wlm munge >/dev/null
+fi
+
+WORK=$(mktemp -d /tmp/hdov-slurm.XXXXXX)
+HOST=$(hostname -s)
+CPUS=$(nproc)
+MEM=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 * 9 / 10 ))
+PIDS=()
+
+stop() {
+  for p in "${PIDS[@]}"; do kill "$p" 2>/dev/null || true; done
+  sleep 1
+  for p in "${PIDS[@]}"; do kill -9 "$p" 2>/dev/null || true; done
+  rm -rf "$WORK"
+}
+trap stop EXIT
+
+fail() {
+  echo "slurm test: $1"
+  for log in "$WORK"/log/*.log; do
+    [ -f "$log" ] && { echo "--- $(basename "$log")"; tail -n 30 "$log"; }
+  done
+  exit 1
+}
+
+mkdir -p "$WORK"/{log,state,spool,munge,run,data}
+chmod 700 "$WORK/munge"
+
+# munge: its own key, socket and pid files in $WORK, so that nothing of the host's changes.
+dd if=/dev/urandom of="$WORK/munge/munge.key" bs=1024 count=1 status=none
+chmod 400 "$WORK/munge/munge.key"
+MUNGE_SOCKET="$WORK/run/munge.socket"
+munged --force --foreground --key-file="$WORK/munge/munge.key" --socket="$MUNGE_SOCKET" \
+  --pid-file="$WORK/run/munged.pid" --log-file="$WORK/log/munged.log" --seed-file="$WORK/munge/seed" \
+  >"$WORK/log/munged.out.log" 2>&1 &
+PIDS+=($!)
+for _ in $(seq 50); do [ -S "$MUNGE_SOCKET" ] && break; sleep 0.1; done
+[ -S "$MUNGE_SOCKET" ] || fail "munged did not start"
+
+# slurm.conf: one node, no accounting, no cgroups (linuxproc tracking, no task plugin), root.
+export SLURM_CONF="$WORK/slurm.conf"
+cat >"$SLURM_CONF" <<EOF
+ClusterName=hdov
+SlurmctldHost=$HOST
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+AuthInfo=socket=$MUNGE_SOCKET
+CredType=cred/munge
+SlurmctldPort=16817
+SlurmdPort=16818
+StateSaveLocation=$WORK/state
+SlurmdSpoolDir=$WORK/spool
+SlurmctldPidFile=$WORK/run/slurmctld.pid
+SlurmdPidFile=$WORK/run/slurmd.pid
+SlurmctldLogFile=$WORK/log/slurmctld.log
+SlurmdLogFile=$WORK/log/slurmd.log
+ProctrackType=proctrack/linuxproc
+TaskPlugin=task/none
+JobAcctGatherType=jobacct_gather/none
+AccountingStorageType=accounting_storage/none
+SchedulerType=sched/backfill
+SchedulerParameters=bf_interval=1
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core
+MpiDefault=none
+ReturnToService=2
+SlurmdTimeout=60
+NodeName=$HOST CPUs=$CPUS RealMemory=$MEM State=UNKNOWN
+PartitionName=local Nodes=$HOST Default=YES MaxTime=INFINITE State=UP AllowAccounts=ALL
+EOF
+cat >"$WORK/cgroup.conf" <<EOF
+IgnoreSystemd=yes
+EOF
+
+slurmctld -D -i -f "$SLURM_CONF" >"$WORK/log/slurmctld.out.log" 2>&1 &
+PIDS+=($!)
+slurmd -D -f "$SLURM_CONF" >"$WORK/log/slurmd.out.log" 2>&1 &
+PIDS+=($!)
+up=""
+for _ in $(seq 100); do
+  if sinfo -h -o '%T' 2>/dev/null | grep -Eq '^(idle|mixed|allocated)'; then up=1; break; fi
+  sleep 0.2
+done
+[ -n "$up" ] || fail "the node never came up (sinfo: $(sinfo -h 2>&1 | head -1))"
+echo "slurm: $(sinfo -h -o '%P %D nodes, %c CPUs, %T')"
+
+# The scene, and the whole build to compare with.
+"$HDOV" generate city --scale "$SCALE" --out "$WORK/data/city" >/dev/null
+SCENE="$WORK/data/city/city.json"
+t0=$(date +%s.%N)
+"$HDOV" build "$SCENE" --out "$WORK/data/whole.hdov" --backend cpu >/dev/null
+t1=$(date +%s.%N)
+
+# The array job, one task per shard; each task sleeps a moment first so that one can be
+# cancelled while it runs.
+cat >"$WORK/shard.sh" <<EOF
+#!/bin/bash
+sleep 2
+exec "$HDOV" build "$SCENE" --out "$WORK/data/shard\$SLURM_ARRAY_TASK_ID.hdov" \\
+  --shard \$SLURM_ARRAY_TASK_ID/$N --backend cpu --force
+EOF
+cat >"$WORK/merge.sh" <<EOF
+#!/bin/bash
+exec "$HDOV" merge $(for i in $(seq 0 $((N - 1))); do printf '%s ' "$WORK/data/shard$i.hdov"; done) --out "$WORK/data/merged.hdov"
+EOF
+chmod +x "$WORK/shard.sh" "$WORK/merge.sh"
+t2=$(date +%s.%N)
+ARRAY=$(sbatch --parsable --requeue --array=0-$((N - 1)) -c 1 -o "$WORK/log/shard-%a.log" "$WORK/shard.sh") \
+  || fail "sbatch of the array job failed"
+MERGE=$(sbatch --parsable --dependency=afterok:"$ARRAY" -o "$WORK/log/merge.log" "$WORK/merge.sh") \
+  || fail "sbatch of the merge job failed"
+echo "slurm: array job $ARRAY ($N shards), merge job $MERGE after it"
+
+# Cancel one running task and put it back in the queue.
+VICTIM=$((N - 1))
+for _ in $(seq 300); do
+  state=$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%T' 2>/dev/null || true)
+  [ "$state" = RUNNING ] && break
+  sleep 0.1
+done
+[ "$state" = RUNNING ] || fail "task $VICTIM never ran (state '$state')"
+scontrol requeue "${ARRAY}_${VICTIM}" || fail "requeue of task $VICTIM failed"
+# Slurm holds a requeued batch job back for two minutes (reason BeginTime); once it is pending
+# again, let it start now.
+for _ in $(seq 100); do
+  [ "$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%T %r' 2>/dev/null)" = "PENDING BeginTime" ] && break
+  sleep 0.1
+done
+scontrol update JobId="${ARRAY}_${VICTIM}" StartTime=now || fail "could not release the requeued task"
+echo "slurm: task $VICTIM cancelled while running and requeued"
+
+for i in $(seq 3000); do
+  [ -z "$(squeue -h -j "$ARRAY,$MERGE" 2>/dev/null)" ] && break
+  [ -n "${HDOV_SLURM_DEBUG:-}" ] && [ $((i % 25)) -eq 0 ] && squeue -h -o '%i %T %r %S' | tr '\n' ';' && echo
+  sleep 0.2
+done
+t3=$(date +%s.%N)
+[ -z "$(squeue -h -j "$ARRAY,$MERGE" 2>/dev/null)" ] || fail "jobs still queued after 10 minutes: $(squeue -h)"
+[ -d "$WORK/data/merged.hdov" ] || fail "the merge job wrote no database: $(cat "$WORK/log/merge.log" 2>/dev/null)"
+runs=$(grep -c . "$WORK/log/shard-$VICTIM.log" 2>/dev/null || echo 0)
+
+# Every data file byte for byte; the manifests differ only in what the builds measured.
+for f in "$WORK"/data/whole.hdov/*; do
+  name=$(basename "$f")
+  [ "$name" = manifest.json ] && continue
+  cmp -s "$f" "$WORK/data/merged.hdov/$name" || fail "$name differs between the merged and the whole build"
+done
+[ "$(ls "$WORK/data/whole.hdov")" = "$(ls "$WORK/data/merged.hdov")" ] || fail "the databases hold different files"
+
+printf 'slurm: merged database equals the whole build (%s files, byte for byte)\n' "$(ls "$WORK/data/whole.hdov" | wc -l)"
+printf 'slurm: whole build %.1f s; %d shards through Slurm, one requeued, and the merge %.1f s (%s CPUs)\n' \
+  "$(echo "$t1 - $t0" | bc)" "$N" "$(echo "$t3 - $t2" | bc)" "$CPUS"
+echo "slurm: 1 passed, 0 failed"
