@@ -332,8 +332,8 @@ fn real_multi_part_obj_files_import_one_object_per_group() {
     }
 }
 
-/// Shards built separately and merged equal one whole build, file for file; a wrong set of
-/// shards is refused.
+/// Shards built separately keep only their V-data; merged with a base build they equal one
+/// whole build, file for file; a wrong set of shards, or a wrong base, is refused.
 #[test]
 fn shards_merge_into_the_whole_database() {
     let tmp = tempfile::tempdir().unwrap();
@@ -349,10 +349,26 @@ fn shards_merge_into_the_whole_database() {
         assert!(o.status.success(), "{}", stderr(&o));
     };
     build(&s("whole"), &[]);
+    build(&s("base"), &["--no-visibility"]);
     for i in 0..3 {
         build(&s(&format!("shard{i}")), &["--shard", &format!("{i}/3")]);
     }
-    let o = hdov(&["merge", &s("shard0"), &s("shard2"), &s("shard1"), "--out", &s("merged")]);
+    // A shard holds its manifest and V-pages, not the scene: it names the files it was
+    // measured against, and is no database to query.
+    let bytes_of = |dir: &str| -> u64 {
+        std::fs::read_dir(tmp.path().join(dir)).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum()
+    };
+    for f in ["tree.pages", "geometry.blob", "catalog.blob"] {
+        assert!(!tmp.path().join("shard1").join(f).exists(), "a shard keeps no {f}");
+    }
+    assert!(
+        bytes_of("shard1") * 10 < bytes_of("base"),
+        "{} bytes against the base's {}",
+        bytes_of("shard1"),
+        bytes_of("base")
+    );
+    assert_refused(&hdov(&["query", &s("shard1"), "--at", "1,1.7,1"]), "is a shard");
+    let o = hdov(&["merge", &s("base"), &s("shard0"), &s("shard2"), &s("shard1"), "--out", &s("merged")]);
     assert!(o.status.success(), "{}", stderr(&o));
     // Every file but the manifest is identical, byte for byte. The manifest differs in what
     // the shards measured, not what they stored: build seconds, and sample points (each shard
@@ -400,23 +416,60 @@ fn shards_merge_into_the_whole_database() {
     forge("shard1", "huge-count", &|m| m["build"]["visibility"]["shard"] = serde_json::json!([1, 4_000_000_000u32]));
     forge("shard1", "no-vis", &|m| m["visibility"] = serde_json::Value::Null);
     for (bad, why) in
-        [("bad-index", "0 ≤ I < N"), ("huge-count", "more shards than"), ("no-vis", "holds no visibility")]
+        [("bad-index", "0 ≤ I < N"), ("huge-count", "more shards than"), ("no-vis", "no shard with visibility")]
     {
-        assert_refused(&hdov(&["merge", &s("shard0"), &s(bad), &s("shard2"), "--out", &s("m6")]), why);
+        assert_refused(&hdov(&["merge", &s("base"), &s("shard0"), &s(bad), &s("shard2"), "--out", &s("m6")]), why);
     }
     forge("shard2", "broken-file", &|_| {});
     std::fs::write(tmp.path().join("broken-file/vpages.vertical"), b"HDOVPAGE").unwrap();
     assert_refused(
-        &hdov(&["merge", &s("shard0"), &s("shard1"), &s("broken-file"), "--out", &s("m7")]),
+        &hdov(&["merge", &s("base"), &s("shard0"), &s("shard1"), &s("broken-file"), "--out", &s("m7")]),
         "vpages.vertical",
     );
     assert!(!tmp.path().join("m6").exists() && !tmp.path().join("m7").exists());
-    assert_refused(&hdov(&["merge", &s("shard0"), &s("shard1"), "--out", &s("m2")]), "shard 2/3 is missing");
-    assert_refused(&hdov(&["merge", &s("shard0"), &s("shard0"), &s("shard1"), "--out", &s("m3")]), "as is");
-    assert_refused(&hdov(&["merge", &s("whole"), "--out", &s("m4")]), "not a shard");
+    let merge = |base: &str, shards: [&str; 3], out: &str| {
+        hdov(&["merge", &s(base), &s(shards[0]), &s(shards[1]), &s(shards[2]), "--out", &s(out)])
+    };
+    assert_refused(
+        &hdov(&["merge", &s("base"), &s("shard0"), &s("shard1"), "--out", &s("m2")]),
+        "shard 2/3 is missing",
+    );
+    assert_refused(&merge("base", ["shard0", "shard0", "shard1"], "m3"), "as is");
+    assert_refused(&hdov(&["merge", &s("base"), &s("whole"), "--out", &s("m4")]), "not a shard");
     build(&s("other"), &["--shard", "1/3", "--zero-dov-floor", "none"]);
-    assert_refused(&hdov(&["merge", &s("shard0"), &s("other"), &s("shard2"), "--out", &s("m5")]), "other parameters");
-    assert!(!tmp.path().join("m2").exists() && !tmp.path().join("m5").exists());
+    assert_refused(&merge("base", ["shard0", "other", "shard2"], "m5"), "other parameters");
+    // The base must be the shards' own: the same parameters, the same scene.
+    let base_of = |scene: &str, out: &str, page_size: &str| {
+        let o = hdov(&[
+            "build",
+            scene,
+            "--out",
+            out,
+            "--no-visibility",
+            "--resolution",
+            "16",
+            "--backend",
+            "cpu",
+            "--page-size",
+            page_size,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    base_of(&scene, &s("base-512"), "512");
+    assert_refused(&merge("base-512", ["shard0", "shard1", "shard2"], "m8"), "other parameters than");
+    // The same city with one house moved by a metre: the same grid and parameters, other files.
+    std::fs::create_dir(tmp.path().join("moved")).unwrap();
+    std::fs::copy(tmp.path().join("city/city.meshes"), tmp.path().join("moved/city.meshes")).unwrap();
+    let mut city: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("city/city.json")).unwrap()).unwrap();
+    let x = city["objects"][0]["transform"][12].as_f64().unwrap();
+    city["objects"][0]["transform"][12] = serde_json::json!(x + 1.0);
+    std::fs::write(tmp.path().join("moved/city.json"), serde_json::to_vec(&city).unwrap()).unwrap();
+    base_of(&s("moved/city.json"), &s("base5"), "1024");
+    assert_refused(&merge("base5", ["shard0", "shard1", "shard2"], "m9"), "measured against another scene");
+    for m in ["m2", "m3", "m4", "m5", "m8", "m9"] {
+        assert!(!tmp.path().join(m).exists(), "{m}");
+    }
 }
 
 /// `--detail-model` instances a real mesh (here a two-group OBJ, merged into one model).

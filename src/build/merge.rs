@@ -1,96 +1,109 @@
-//! Joining shard databases (`hdov build --shard I/N`) into one.
+//! Joining shards (`hdov build --shard I/N`) into one database.
 //!
-//! Every shard holds the same tree, LODs and catalog (a build is deterministic) and the V-pages
-//! of its own cells. The merge checks that the shards belong together and cover every cell once,
-//! copies the view-invariant files, reads each shard's cells from one of its layouts and writes
-//! all layouts anew.
+//! A shard keeps only the V-pages of its own cells and names, by size and crc32, the tree,
+//! catalog and geometry it was measured against (a build is deterministic, so every shard of
+//! one build names the same files). The merge takes those files from a base build of the same
+//! scene and parameters (`hdov build --no-visibility`), checks that every shard was measured
+//! against exactly them and that the shards cover every cell once, reads each shard's cells from
+//! one of its layouts and writes all layouts anew.
 
 use std::path::{Path, PathBuf};
 
-use hdov_storage::VData;
+use hdov_storage::{Layout, ReadMode, VData};
 
 use super::vpages::read_cells;
 use super::{VisibilityParams, begin_write, write_layouts, write_manifest};
 use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
-use crate::format::{CATALOG_FILE, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
+use crate::format::{CATALOG_FILE, FileChecksum, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
 use crate::grid::ViewGrid;
 use crate::overwrite::Overwrite;
 
-/// One shard database, checked to be a shard: its visibility parameters, results and grid.
-struct ShardDb {
-    db: Database,
+/// One shard, checked to be one: its manifest, visibility parameters and results, grid, and the
+/// layout its cells are read from.
+struct ShardDir {
+    path: PathBuf,
+    manifest: Manifest,
     params: VisibilityParams,
     info: VisibilityInfo,
     shard: Shard,
     grid: ViewGrid,
+    against: Vec<FileChecksum>,
+    layout: Layout,
 }
 
-impl ShardDb {
-    fn open(path: &Path) -> Result<ShardDb> {
-        let db = Database::open(path)?;
-        let m = db.manifest();
-        let (Some(params), Some(info), Some(grid)) = (m.build.visibility.clone(), m.visibility.clone(), m.grid) else {
+impl ShardDir {
+    fn open(path: &Path) -> Result<ShardDir> {
+        let manifest = Manifest::read(path)?;
+        let (Some(params), Some(info), Some(grid)) =
+            (manifest.build.visibility.clone(), manifest.visibility.clone(), manifest.grid)
+        else {
             return Err(Error::bad_file(path, "holds no visibility"));
         };
-        let shard = params.shard.ok_or_else(|| Error::bad_file(path, "is not a shard (built without a shard)"))?;
-        if db.layouts().is_empty() {
-            return Err(Error::bad_file(path, "holds no layout"));
+        let shard = params.shard.ok_or_else(|| Error::bad_file(path, "is not a shard (built without --shard)"))?;
+        let against = manifest
+            .measured_against
+            .clone()
+            .ok_or_else(|| Error::bad_file(path, "is a shard that keeps the whole scene: rebuild it with this hdov"))?;
+        let kind = *params.layouts.first().ok_or_else(|| Error::bad_file(path, "holds no layout"))?;
+        let layout = Layout::open(path, kind, ReadMode::Mmap)?;
+        let file = path.join(kind.file_names()[0]);
+        if u64::from(layout.node_count()) != manifest.counts.nodes || u64::from(layout.cell_count()) != manifest.counts.cells
+        {
+            return Err(Error::bad_file(file, format!("{kind} layout's node or cell count differs from the manifest's")));
         }
-        Ok(ShardDb { db, params, info, shard, grid })
-    }
-
-    fn path(&self) -> &Path {
-        self.db.dir()
+        Ok(ShardDir { path: path.to_path_buf(), manifest, params, info, shard, grid, against, layout })
     }
 }
 
-/// Merges `shards` into a new database at `out`. An existing `out` is refused unless `replace`
-/// and it is an hdov database or an empty directory. Every shard is opened and validated, and
-/// the set is refused in one line unless the shards share one build (parameters, grid and
-/// byte-identical tree, geometry and catalog) and cover every part exactly once.
-pub fn merge(shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
-    let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shard databases given"))?;
-    let dbs = shards.iter().map(|p| ShardDb::open(p)).collect::<Result<Vec<_>>>()?;
-    let first = &dbs[0];
+/// The size and crc32 of `base`'s tree, catalog and geometry, as a shard names them.
+fn invariant_files(base: &Database) -> Result<Vec<FileChecksum>> {
+    [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE]
+        .iter()
+        .map(|f| {
+            let p = base.dir().join(f);
+            let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+            Ok(FileChecksum { name: (*f).into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) })
+        })
+        .collect()
+}
+
+/// Merges `shards` with the scene files of `base` into a new database at `out`. An existing `out`
+/// is refused unless `overwrite` allows ours and it is an hdov database or an empty directory.
+/// The set is refused in one line unless every shard was built with the base's parameters (the
+/// shard aside) and grid, was measured against the base's very tree, catalog and geometry, and
+/// the shards cover every part exactly once. Memory: all cells' visible V-pages at once.
+pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
+    let base_db = Database::open(base)?;
+    let files = invariant_files(&base_db)?;
+    let base_manifest = base_db.manifest();
+    let grid = base_manifest.grid.ok_or_else(|| Error::bad_file(base, "holds no viewing grid"))?;
+    let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shards given"))?;
+    let dirs = shards.iter().map(|p| ShardDir::open(p)).collect::<Result<Vec<_>>>()?;
+    let first = &dirs[0];
     let count = first.shard.count;
     let mut seen = vec![None::<&Path>; count as usize];
-    let invariant_files = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE];
-    let checksums = |db: &Database| -> Result<Vec<u32>> {
-        invariant_files
-            .iter()
-            .map(|f| {
-                let p = db.dir().join(f);
-                std::fs::read(&p).map(|b| crc32fast::hash(&b)).map_err(|e| Error::io(&p, e))
-            })
-            .collect()
-    };
-    let reference = checksums(&first.db)?;
-    // Two builds belong together if they differ in nothing but the shard.
-    let same_build = |s: &ShardDb| {
-        let mut build = s.db.manifest().build.clone();
-        if let Some(v) = build.visibility.as_mut() {
-            v.shard = first.params.shard;
+    // A shard belongs to the base if their builds differ in nothing but visibility.
+    let without_visibility = |m: &Manifest| crate::format::params::BuildParams { visibility: None, ..m.build.clone() };
+    for s in &dirs {
+        let mut params = s.params.clone();
+        params.shard = first.params.shard;
+        if s.shard.count != count || params != first.params {
+            return Err(Error::bad_file(&s.path, format!("was built with other parameters than {}", first_path.display())));
         }
-        build == first.db.manifest().build && s.grid == first.grid
-    };
-    for s in &dbs {
-        if s.shard.count != count || !same_build(s) {
-            return Err(Error::bad_file(
-                s.path(),
-                format!("was built with other parameters than {}", first_path.display()),
-            ));
+        if without_visibility(&s.manifest) != without_visibility(base_manifest) || s.grid != grid {
+            return Err(Error::bad_file(&s.path, format!("was built with other parameters than {}", base.display())));
         }
-        if checksums(&s.db)? != reference {
+        if s.against != files {
             return Err(Error::bad_file(
-                s.path(),
-                format!("holds another scene or tree than {}", first_path.display()),
+                &s.path,
+                format!("was measured against another scene or tree than {} holds", base.display()),
             ));
         }
         // `index < count` holds for every shard read (checked on open), and count is shared.
-        if let Some(other) = seen[s.shard.index as usize].replace(s.db.dir()) {
-            return Err(Error::bad_file(s.path(), format!("is shard {}, as is {}", s.shard, other.display())));
+        if let Some(other) = seen[s.shard.index as usize].replace(&s.path) {
+            return Err(Error::bad_file(&s.path, format!("is shard {}, as is {}", s.shard, other.display())));
         }
     }
     if let Some(missing) = seen.iter().position(Option::is_none) {
@@ -98,16 +111,15 @@ pub fn merge(shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Man
     }
 
     let txn = begin_write(out, overwrite)?;
-    for f in invariant_files {
-        let (from, to) = (first.db.dir().join(f), txn.path().join(f));
+    for f in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
+        let (from, to) = (base.join(f), txn.path().join(f));
         let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;
         hdov_storage::write_file_synced(&to, &bytes)?;
     }
-    let grid = first.grid;
     let mut data = VData {
         cell_count: grid.cell_count() as u32,
-        node_fanout: (0..first.db.node_count())
-            .map(|id| first.db.node(id).map(|p| p.node.entries.len() as u16))
+        node_fanout: (0..base_db.node_count())
+            .map(|id| base_db.node(id).map(|p| p.node.entries.len() as u16))
             .collect::<Result<_>>()?,
         cells: vec![Vec::new(); grid.cell_count()],
     };
@@ -119,10 +131,9 @@ pub fn merge(shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Man
         seconds: 0.0,
         ..first.info.clone()
     };
-    for s in &dbs {
+    for s in &dirs {
         let range = s.shard.cells(&grid);
-        let layout = s.db.layout(s.db.layouts()[0])?;
-        for (cell, pages) in read_cells(layout, range.start as u32..range.end as u32)? {
+        for (cell, pages) in read_cells(&s.layout, range.start as u32..range.end as u32)? {
             data.cells[cell as usize] = pages;
         }
         info.cells_computed += s.info.cells_computed;
@@ -131,13 +142,11 @@ pub fn merge(shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Man
         info.skipped_points += s.info.skipped_points;
         info.seconds += s.info.seconds;
     }
-    let page_size = first.db.manifest().build.page_size;
+    let page_size = base_manifest.build.page_size;
     info.layouts = write_layouts(txn.path(), &first.params.layouts, &data, page_size, first.params.dov_codec)?;
-    let mut manifest = first.db.manifest().clone();
+    let mut manifest = base_manifest.clone();
+    manifest.build.visibility = Some(VisibilityParams { shard: None, ..first.params.clone() });
     manifest.visibility = Some(info);
-    if let Some(v) = manifest.build.visibility.as_mut() {
-        v.shard = None;
-    }
     write_manifest(txn.path(), &manifest)?;
     txn.commit()?;
     Ok(manifest)

@@ -22,7 +22,7 @@ use crate::format::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
 pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
 use crate::format::tree_page::{self, NodePage};
 use crate::format::{
-    CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
+    CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileChecksum, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
     MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
 };
 use crate::grid::ViewGrid;
@@ -176,11 +176,24 @@ pub fn build(
         grid: scene.grid,
         files: Vec::new(),
         visibility,
+        measured_against: None,
     };
+    let is_shard = manifest.build.visibility.as_ref().is_some_and(|v| v.shard.is_some());
+    let mut against = Vec::new();
     for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
-        let bytes = std::fs::metadata(dir.join(name)).map_err(|e| Error::io(dir.join(name), e))?.len();
-        manifest.files.push(FileEntry { name: name.into(), bytes });
+        let path = dir.join(name);
+        if is_shard {
+            // A shard keeps its V-data only: the scene's files are named, not stored, and the
+            // merge takes them from a base build (docs/sharding.md).
+            let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            against.push(FileChecksum { name: name.into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) });
+            std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+        } else {
+            let bytes = std::fs::metadata(&path).map_err(|e| Error::io(&path, e))?.len();
+            manifest.files.push(FileEntry { name: name.into(), bytes });
+        }
     }
+    manifest.measured_against = is_shard.then_some(against);
     write_manifest(&dir, &manifest)?;
     txn.commit()?;
     Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned, restored })

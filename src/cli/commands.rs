@@ -104,7 +104,8 @@ pub struct VisibilityArgs {
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
     #[arg(long, default_value = "auto")]
     backend: BackendKind,
-    /// Compute only part I of N of the cells (join the parts with `hdov merge`).
+    /// Compute only part I of N of the cells, keeping only their V-data (join the parts with a
+    /// --no-visibility base build: `hdov merge BASE SHARDS… --out DB`).
     #[arg(long)]
     shard: Option<Shard>,
     /// V-page layouts to write, comma-separated.
@@ -159,7 +160,10 @@ impl VisibilityArgs {
 
 #[derive(Args)]
 pub struct MergeArgs {
-    /// The shard databases, all N of them.
+    /// The base build whose tree, LODs and catalog the shards were measured against (the same
+    /// scene and parameters, built with --no-visibility).
+    base: PathBuf,
+    /// The shards (hdov build --shard I/N), all N of them.
     #[arg(required = true)]
     shards: Vec<PathBuf>,
     #[arg(long)]
@@ -470,7 +474,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 }
 
 pub fn merge(a: MergeArgs) -> Result<()> {
-    let m = hdov::merge(&a.shards, &a.out, overwrite(a.force))?;
+    let m = hdov::merge(&a.base, &a.shards, &a.out, overwrite(a.force))?;
     let (cells, points) = m.visibility.as_ref().map_or((0, 0), |v| (v.cells_computed, v.sample_points));
     println!("{}: merged {} shards, {cells} cells, {points} sample points", a.out.display(), a.shards.len());
     Ok(())

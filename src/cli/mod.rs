@@ -29,7 +29,7 @@ enum Command {
     Generate(commands::GenerateCommand),
     /// Build a database from a scene (a glTF file, an OBJ file or a scene manifest .json).
     Build(commands::BuildArgs),
-    /// Join shard databases (built with --shard I/N) into one.
+    /// Join shards (built with --shard I/N) with their base build (--no-visibility) into one database.
     Merge(commands::MergeArgs),
     /// Describe a database: counts, build parameters, file sizes.
     Info(commands::InfoArgs),

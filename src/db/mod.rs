@@ -48,6 +48,12 @@ impl Database {
             return Err(Error::bad_file(dir, "no such database directory"));
         }
         let manifest = Manifest::read(dir)?;
+        if manifest.measured_against.is_some() {
+            return Err(Error::bad_file(
+                dir,
+                "is a shard, which keeps only its cells' visibility: join the shards with their base build (hdov merge BASE SHARD… --out DB)",
+            ));
+        }
         let tree = PageFile::open(&dir.join(TREE_FILE), TREE_KIND, mode)?;
         let geometry = BlobFile::open(&dir.join(GEOMETRY_FILE), GEOMETRY_KIND)?;
         let catalog_file = BlobFile::open(&dir.join(CATALOG_FILE), CATALOG_KIND)?;

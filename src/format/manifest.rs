@@ -57,6 +57,14 @@ pub struct FileEntry {
     pub bytes: u64,
 }
 
+/// A view-invariant file a shard was measured against: its name, size and crc32.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileChecksum {
+    pub name: String,
+    pub bytes: u64,
+    pub crc32: u32,
+}
+
 /// `manifest.json`. Its first key, `"hdov": "database"`, is the file's magic.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
@@ -78,6 +86,12 @@ pub struct Manifest {
     pub files: Vec<FileEntry>,
     /// What the visibility stage measured and wrote (`None`: built without visibility).
     pub visibility: Option<VisibilityInfo>,
+    /// A shard (`hdov build --shard`) keeps only its cells' V-data: the tree, catalog and
+    /// geometry it was measured against are named here, by size and crc32, not stored; `hdov
+    /// merge` takes them from a base build and refuses a shard whose files differ. Absent in a
+    /// whole database.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_against: Option<Vec<FileChecksum>>,
 }
 
 /// The first two keys of a manifest: enough to tell an hdov database from anything else.
@@ -158,9 +172,24 @@ impl Manifest {
             return Err("visibility results without their parameters".into());
         }
         let mut expected: Vec<&FileEntry> = self.files.iter().collect();
-        for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
-            if !self.files.iter().any(|f| f.name == name) {
-                return Err(format!("lists no {name}"));
+        let invariant = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE];
+        match &self.measured_against {
+            None => {
+                if let Some(name) = invariant.iter().find(|n| !self.files.iter().any(|f| f.name == **n)) {
+                    return Err(format!("lists no {name}"));
+                }
+            }
+            Some(against) => {
+                if self.build.visibility.as_ref().and_then(|v| v.shard).is_none() || self.visibility.is_none() {
+                    return Err("names the files it was measured against, but is no shard with visibility".into());
+                }
+                let named: Vec<&str> = against.iter().map(|f| f.name.as_str()).collect();
+                if named != invariant {
+                    return Err(format!("measured against {named:?}, not {invariant:?}"));
+                }
+                if let Some(f) = self.files.iter().find(|f| invariant.contains(&f.name.as_str())) {
+                    return Err(format!("a shard lists {}, which it does not keep", f.name));
+                }
             }
         }
         if let (Some(v), Some(params)) = (&self.visibility, &self.build.visibility) {

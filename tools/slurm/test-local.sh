@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # A sharded build on a real scheduler: a single-node Slurm (munged, slurmctld, slurmd on
-# localhost, as root, without systemd) runs `hdov build --shard $SLURM_ARRAY_TASK_ID/N` as an
-# array job and `hdov merge` as a job that depends on it (afterok); one task is cancelled
-# mid-run and requeued. The merged database must equal a whole build, every data file byte for
-# byte. Prints the wall times of the sharded run and the whole build.
+# localhost, as root, without systemd) runs the base build (`hdov build --no-visibility`: tree,
+# LODs, catalog) as one job, `hdov build --shard $SLURM_ARRAY_TASK_ID/N` as an array job (each
+# shard keeps only its cells' V-data), and `hdov merge BASE SHARDS…` as a job that depends on
+# both (afterok); one task is cancelled mid-run and requeued. The merged database must equal a
+# whole build, every data file byte for byte. Prints the wall times and the bytes the shards
+# and the base wrote.
 #
 #   tools/slurm/test-local.sh [HDOV_BINARY] [SCALE] [SHARDS]     (defaults: target/release/hdov small 4)
 #
@@ -62,6 +64,17 @@ PIDS+=($!)
 for _ in $(seq 50); do [ -S "$MUNGE_SOCKET" ] && break; sleep 0.1; done
 [ -S "$MUNGE_SOCKET" ] || fail "munged did not start"
 
+# Two free ports for slurmctld and slurmd (another Slurm may run on the standard ones).
+free_port() {
+  local p
+  for p in $(seq "$1" $(($1 + 200))); do
+    (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null || { echo "$p"; return; }
+  done
+  fail "no free port from $1"
+}
+CTLD_PORT=$(free_port 16817)
+SLURMD_PORT=$(free_port $((CTLD_PORT + 1)))
+
 # slurm.conf: one node, no accounting, no cgroups (linuxproc tracking, no task plugin), root.
 export SLURM_CONF="$WORK/slurm.conf"
 cat >"$SLURM_CONF" <<EOF
@@ -72,8 +85,8 @@ SlurmdUser=root
 AuthType=auth/munge
 AuthInfo=socket=$MUNGE_SOCKET
 CredType=cred/munge
-SlurmctldPort=16817
-SlurmdPort=16818
+SlurmctldPort=$CTLD_PORT
+SlurmdPort=$SLURMD_PORT
 StateSaveLocation=$WORK/state
 SlurmdSpoolDir=$WORK/spool
 SlurmctldPidFile=$WORK/run/slurmctld.pid
@@ -125,17 +138,22 @@ sleep 2
 exec "$HDOV" build "$SCENE" --out "$WORK/data/shard\$SLURM_ARRAY_TASK_ID.hdov" \\
   --shard \$SLURM_ARRAY_TASK_ID/$N --backend cpu --force
 EOF
+cat >"$WORK/base.sh" <<EOF
+#!/bin/bash
+exec "$HDOV" build "$SCENE" --out "$WORK/data/base.hdov" --backend cpu --no-visibility
+EOF
 cat >"$WORK/merge.sh" <<EOF
 #!/bin/bash
-exec "$HDOV" merge $(for i in $(seq 0 $((N - 1))); do printf '%s ' "$WORK/data/shard$i.hdov"; done) --out "$WORK/data/merged.hdov"
+exec "$HDOV" merge "$WORK/data/base.hdov" $(for i in $(seq 0 $((N - 1))); do printf '%s ' "$WORK/data/shard$i.hdov"; done) --out "$WORK/data/merged.hdov"
 EOF
-chmod +x "$WORK/shard.sh" "$WORK/merge.sh"
+chmod +x "$WORK/base.sh" "$WORK/shard.sh" "$WORK/merge.sh"
 t2=$(date +%s.%N)
+BASE=$(sbatch --parsable -c 1 -o "$WORK/log/base.log" "$WORK/base.sh") || fail "sbatch of the base build failed"
 ARRAY=$(sbatch --parsable --requeue --array=0-$((N - 1)) -c 1 -o "$WORK/log/shard-%a.log" "$WORK/shard.sh") \
   || fail "sbatch of the array job failed"
-MERGE=$(sbatch --parsable --dependency=afterok:"$ARRAY" -o "$WORK/log/merge.log" "$WORK/merge.sh") \
+MERGE=$(sbatch --parsable --dependency=afterok:"$BASE":"$ARRAY" -o "$WORK/log/merge.log" "$WORK/merge.sh") \
   || fail "sbatch of the merge job failed"
-echo "slurm: array job $ARRAY ($N shards), merge job $MERGE after it"
+echo "slurm: base job $BASE, array job $ARRAY ($N shards), merge job $MERGE after both"
 
 # Cancel one running task and put it back in the queue.
 VICTIM=$((N - 1))
@@ -156,12 +174,12 @@ scontrol update JobId="${ARRAY}_${VICTIM}" StartTime=now || fail "could not rele
 echo "slurm: task $VICTIM cancelled while running and requeued"
 
 for i in $(seq 3000); do
-  [ -z "$(squeue -h -j "$ARRAY,$MERGE" 2>/dev/null)" ] && break
+  [ -z "$(squeue -h -j "$BASE,$ARRAY,$MERGE" 2>/dev/null)" ] && break
   [ -n "${HDOV_SLURM_DEBUG:-}" ] && [ $((i % 25)) -eq 0 ] && squeue -h -o '%i %T %r %S' | tr '\n' ';' && echo
   sleep 0.2
 done
 t3=$(date +%s.%N)
-[ -z "$(squeue -h -j "$ARRAY,$MERGE" 2>/dev/null)" ] || fail "jobs still queued after 10 minutes: $(squeue -h)"
+[ -z "$(squeue -h -j "$BASE,$ARRAY,$MERGE" 2>/dev/null)" ] || fail "jobs still queued after 10 minutes: $(squeue -h)"
 [ -d "$WORK/data/merged.hdov" ] || fail "the merge job wrote no database: $(cat "$WORK/log/merge.log" 2>/dev/null)"
 runs=$(grep -c . "$WORK/log/shard-$VICTIM.log" 2>/dev/null || echo 0)
 
@@ -174,6 +192,8 @@ done
 [ "$(ls "$WORK/data/whole.hdov")" = "$(ls "$WORK/data/merged.hdov")" ] || fail "the databases hold different files"
 
 printf 'slurm: merged database equals the whole build (%s files, byte for byte)\n' "$(ls "$WORK/data/whole.hdov" | wc -l)"
-printf 'slurm: whole build %.1f s; %d shards through Slurm, one requeued, and the merge %.1f s (%s CPUs)\n' \
+printf 'slurm: the %d shards wrote %s bytes in all, the base %s (the scene once)\n' "$N" \
+  "$(du -cb "$WORK"/data/shard*.hdov | tail -1 | cut -f1)" "$(du -sb "$WORK/data/base.hdov" | cut -f1)"
+printf 'slurm: whole build %.1f s; the base, %d shards through Slurm (one requeued) and the merge %.1f s (%s CPUs)\n' \
   "$(echo "$t1 - $t0" | bc)" "$N" "$(echo "$t3 - $t2" | bc)" "$CPUS"
 echo "slurm: 1 passed, 0 failed"
