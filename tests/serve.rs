@@ -190,6 +190,51 @@ fn routes_answer_what_the_library_answers() {
     assert!(scene["items"].as_array().unwrap().iter().all(|i| i["lod"] == 0 && i["mesh"].is_string()));
     let walk = get(addr, "/recorded-walk?kind=turning&steps=20").json();
     assert_eq!(walk["steps"].as_array().unwrap().len(), 20);
+
+    // /walk: a session over a path; applying each step's loads and drops holds exactly the
+    // answer a library session holds at that step.
+    let centres = db.grid().unwrap().cell_centres();
+    let path = [centres[0], centres[0] + glam::Vec3::new(0.5, 0.0, 0.0), centres[1], centres[5], centres[0]];
+    let text: Vec<String> = path.iter().map(|p| format!("{},{},{}", p.x, p.y, p.z)).collect();
+    let served = get(addr, &format!("/walk?path={}", text.join(";")));
+    assert_eq!(served.status, 200, "{}", String::from_utf8_lossy(&served.body));
+    let served = served.json();
+    let steps = served["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), path.len());
+    let mut session = db.session(&hdov::SessionParams::default()).unwrap();
+    let mut held: std::collections::BTreeSet<(String, u64, u64)> = Default::default();
+    let key = |v: &Value| (v[0].as_str().unwrap().to_string(), v[1].as_u64().unwrap(), v[2].as_u64().unwrap());
+    for (k, (step, at)) in steps.iter().zip(path).enumerate() {
+        session.step(at, None).unwrap();
+        for d in step["drop"].as_array().unwrap() {
+            assert!(held.remove(&key(d)), "step {k}: drops what it does not hold");
+        }
+        for l in step["load"].as_array().unwrap() {
+            assert!(l["mesh"].is_string());
+            let item = (l["kind"].as_str().unwrap().to_string(), l["id"].as_u64().unwrap(), l["lod"].as_u64().unwrap());
+            assert!(held.insert(item), "step {k}: loads what it holds");
+        }
+        let want: std::collections::BTreeSet<_> = session
+            .answer()
+            .unwrap()
+            .items
+            .iter()
+            .map(|i| {
+                (
+                    if i.kind == hdov::ItemKind::Node { "node" } else { "object" }.to_string(),
+                    u64::from(i.id),
+                    u64::from(i.lod),
+                )
+            })
+            .collect();
+        assert_eq!(held, want, "step {k}");
+    }
+    assert_eq!(steps[1]["flipped"], false, "a step inside the same cell asks nothing");
+    assert!(steps[1]["load"].as_array().unwrap().is_empty() && steps[1]["drop"].as_array().unwrap().is_empty());
+    assert_eq!(
+        get(addr, "/walk?path=1,2;3,4,5").error(),
+        "path: step 0: expected 3 comma-separated numbers for a point X,Y,Z, got 2 in '1,2'"
+    );
 }
 
 #[test]

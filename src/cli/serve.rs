@@ -1,9 +1,10 @@
 //! `hdov serve`: one database, opened once and shared read-only by every request, over HTTP (axum
 //! on tokio), with the viewer page at `/`.
 //!
-//! Routes: `/info`, `/query?at=…`, `/mesh/{offset}-{crc}.glb` (one stored LOD level, immutable:
-//! the URL names the record and its checksum), `/scene` (every object at full detail, the viewer's
-//! "full scene"), `/recorded-walk?kind=…` and the viewer's files. Safe by default: loopback unless
+//! Routes: `/info`, `/query?at=…`, `/walk?path=…` (a session over a path: per step, what to load
+//! and what to drop), `/mesh/{offset}-{crc}.glb` (one stored LOD level, immutable: the URL names
+//! the record and its checksum), `/scene` (every object at full detail, the viewer's "full
+//! scene"), `/recorded-walk?kind=…` and the viewer's files. Safe by default: loopback unless
 //! `--addr` says otherwise, GET only, nothing writes, parameters and URLs bounded, mesh references
 //! checked against the catalog (no part of a request reaches the filesystem), a concurrency limit
 //! and a per-request timeout. A client's mistake is a 400 or 404 with `{"error": …}` in the
@@ -125,6 +126,7 @@ fn router(served: Arc<Served>, concurrency: usize, timeout: Duration) -> Router 
         .route("/query", get(query))
         .route("/scene", get(scene))
         .route("/recorded-walk", get(recorded_walk))
+        .route("/walk", get(walk))
         .route("/mesh/{name}", get(mesh))
         .fallback(|| async {
             Reply::NotFound("no such route (/, /info, /query, /scene, /recorded-walk, /mesh/…)".into())
@@ -243,21 +245,27 @@ async fn info(State(s): State<Arc<Served>>) -> Result<axum::Json<Value>, Reply> 
 
 const QUERY_KEYS: &[&str] = &["at", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
 
+/// The query a request asks, from its `look`, `fov`, `eta`, `mode`, `lod_rule`, `layout`,
+/// `budget` and `tau` (each as the command line parses it).
+fn query_params(p: &HashMap<String, String>) -> Result<QueryParams, Reply> {
+    let look = value(p, "look", parse_vec3)?;
+    let fov = value(p, "fov", number::<f32>("a number of degrees"))?;
+    let defaults = QueryParams::default();
+    Ok(QueryParams {
+        mode: value(p, "mode", str::parse::<Mode>)?.unwrap_or(defaults.mode),
+        eta: value(p, "eta", number::<f64>("a number"))?.unwrap_or(defaults.eta),
+        budget: value(p, "budget", number::<u64>("a count of faces"))?.unwrap_or(defaults.budget),
+        tau: value(p, "tau", number::<f64>("a number of pixels"))?.unwrap_or(defaults.tau),
+        lod_rule: value(p, "lod_rule", str::parse::<LodRule>)?.unwrap_or(defaults.lod_rule),
+        layout: value(p, "layout", |s| s.parse::<LayoutKind>().map_err(|e| e.to_string()))?,
+        camera: look.map(|look| Camera { look, fov_y_deg: fov.unwrap_or(60.0), ..Camera::default() }),
+    })
+}
+
 async fn query(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
     let p = pairs(raw, QUERY_KEYS)?;
     let at = value(&p, "at", parse_vec3)?.ok_or_else(|| Reply::Bad("at: missing (at=X,Y,Z)".into()))?;
-    let look = value(&p, "look", parse_vec3)?;
-    let fov = value(&p, "fov", number::<f32>("a number of degrees"))?;
-    let defaults = QueryParams::default();
-    let params = QueryParams {
-        mode: value(&p, "mode", str::parse::<Mode>)?.unwrap_or(defaults.mode),
-        eta: value(&p, "eta", number::<f64>("a number"))?.unwrap_or(defaults.eta),
-        budget: value(&p, "budget", number::<u64>("a count of faces"))?.unwrap_or(defaults.budget),
-        tau: value(&p, "tau", number::<f64>("a number of pixels"))?.unwrap_or(defaults.tau),
-        lod_rule: value(&p, "lod_rule", str::parse::<LodRule>)?.unwrap_or(defaults.lod_rule),
-        layout: value(&p, "layout", |s| s.parse::<LayoutKind>().map_err(|e| e.to_string()))?,
-        camera: look.map(|look| Camera { look, fov_y_deg: fov.unwrap_or(60.0), ..Camera::default() }),
-    };
+    let params = query_params(&p)?;
     blocking(s, move |s| {
         let answer = s.db.query(at, &params).map_err(reply)?;
         let served = ServedAnswer {
@@ -343,6 +351,52 @@ async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) ->
     let steps: Vec<Value> =
         path.iter().map(|(at, look): &(Vec3, Vec3)| json!({ "at": at.to_array(), "look": look.to_array() })).collect();
     Ok(axum::Json(json!({ "kind": kind.name(), "steps": steps })))
+}
+
+const WALK_KEYS: &[&str] = &["path", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
+
+/// One step of a walk as a client needs it: what to load and what to drop since the last step.
+#[derive(Serialize)]
+struct ServedStep<'a> {
+    #[serde(flatten)]
+    step: &'a hdov::Step,
+    load: Vec<ServedItem<'a>>,
+    drop: Vec<(hdov::ItemKind, u32, u32)>,
+}
+
+/// `GET /walk?path=X,Y,Z;X,Y,Z;…`: a walkthrough session over the path (the library's
+/// `Session`, its page cache and delta loading), answered step by step with the items to load
+/// and the (kind, id, level) keys to drop, so that a client holds exactly the last answer.
+async fn walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
+    let p = pairs(raw, WALK_KEYS)?;
+    let path = p.get("path").ok_or_else(|| Reply::Bad("path: missing (path=X,Y,Z;X,Y,Z;…)".into()))?;
+    let points: Vec<Vec3> = path
+        .split(';')
+        .enumerate()
+        .map(|(k, v)| parse_vec3(v).map_err(|r| Reply::Bad(format!("path: step {k}: {r}"))))
+        .collect::<Result<_, _>>()?;
+    let params = hdov::SessionParams { query: query_params(&p)?, ..Default::default() };
+    blocking(s, move |s| {
+        let mut session = s.db.session(&params).map_err(reply)?;
+        let mut held: std::collections::HashSet<(hdov::ItemKind, u32, u32)> = Default::default();
+        let mut steps = Vec::new();
+        let mut answers = Vec::new();
+        for at in points {
+            let step = session.step(at, None).map_err(reply)?;
+            let answer = session.answer().cloned().expect("a step leaves an answer");
+            answers.push((step, answer));
+        }
+        for (step, answer) in &answers {
+            let now: std::collections::HashSet<_> = answer.items.iter().map(Item::key).collect();
+            let load = answer.items.iter().filter(|i| !held.contains(&i.key())).map(|i| ServedItem::of(s, i)).collect();
+            let mut drop: Vec<_> = held.difference(&now).copied().collect();
+            drop.sort_unstable();
+            held = now;
+            steps.push(ServedStep { step, load, drop });
+        }
+        Ok(json_response(&json!({ "steps": steps })))
+    })
+    .await
 }
 
 async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: HeaderMap) -> Result<Response, Reply> {
