@@ -14,17 +14,15 @@ use crate::error::{Error, Result};
 use crate::format::catalog::LodRef;
 use crate::query::{Answer, Item, ItemKind};
 
-/// One node to write: what it draws, under which transform, and what it is.
+/// One node to write: the item it draws, and its DoV where it has one (an answer's).
 struct Part<'a> {
     item: &'a Item,
     dov: Option<f32>,
-    transform: Mat4,
 }
 
 /// The answer as a `.glb` at `out`: every item a node at its level. Refuses an existing `out`.
 pub fn write_answer_glb(db: &Database, answer: &Answer, out: &Path) -> Result<()> {
-    let parts: Vec<Part> =
-        answer.items.iter().map(|i| Part { item: i, dov: Some(i.dov), transform: db.item_transform(i) }).collect();
+    let parts: Vec<Part> = answer.items.iter().map(|i| Part { item: i, dov: Some(i.dov) }).collect();
     write_new(out, &glb_of(db, &parts)?)
 }
 
@@ -32,7 +30,7 @@ pub fn write_answer_glb(db: &Database, answer: &Answer, out: &Path) -> Result<()
 /// chain is shorter; 0 = full detail). Refuses an existing `out`.
 pub fn write_scene_glb(db: &Database, lod: u32, out: &Path) -> Result<()> {
     let items = scene_items(db, lod)?;
-    let parts: Vec<Part> = items.iter().map(|i| Part { item: i, dov: None, transform: db.item_transform(i) }).collect();
+    let parts: Vec<Part> = items.iter().map(|i| Part { item: i, dov: None }).collect();
     write_new(out, &glb_of(db, &parts)?)
 }
 
@@ -143,8 +141,9 @@ fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
             extras["dov"] = json!(d);
         }
         let mut node = json!({ "name": &*i.name, "mesh": mesh, "extras": extras });
-        if p.transform != Mat4::IDENTITY {
-            node["matrix"] = json!(p.transform.to_cols_array());
+        let transform = db.item_transform(i);
+        if transform != Mat4::IDENTITY {
+            node["matrix"] = json!(transform.to_cols_array());
         }
         nodes.push(node);
     }
@@ -190,8 +189,9 @@ fn push_view(bin: &mut Vec<u8>, views: &mut Vec<Value>, data: &[u8], target: u32
     views.len() - 1
 }
 
-/// The `.glb` container: header, JSON chunk (space-padded), BIN chunk (zero-padded).
-fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+/// The `.glb` container of glTF document `doc` and binary chunk `bin`: header, JSON chunk
+/// (space-padded), BIN chunk (zero-padded; none when `bin` is empty).
+pub fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
     let mut json = serde_json::to_vec(doc).expect("serialisable");
     while !json.len().is_multiple_of(4) {
         json.push(b' ');

@@ -281,12 +281,7 @@ fn killed_build_leaves_the_old_database() {
 /// Real multi-part OBJ exports from Debian's `assimp-testmodels` (installed by `.ci/run`).
 #[test]
 fn real_multi_part_obj_files_import_one_object_per_group() {
-    let dir = Path::new("/usr/share/assimp/models");
-    if !dir.exists() {
-        assert!(std::env::var_os("HDOV_REQUIRE_TESTDATA").is_none(), "assimp-testmodels is not installed");
-        println!("skipped: no /usr/share/assimp/models (apt-get install assimp-testmodels)");
-        return;
-    }
+    let Some(dir) = hdov_testkit::testdata::assimp_models("") else { return };
     let tmp = tempfile::tempdir().unwrap();
     for name in ["spider", "regr01"] {
         let obj = dir.join(format!("OBJ/{name}.obj"));

@@ -4,21 +4,16 @@
 //!
 //! `cargo test --release --test dov_audit -- --ignored --nocapture`
 
-use glam::Vec3;
 use hdov::dov::CpuBackend;
 use hdov::dov::precompute::FloorTest;
-use hdov::geom::Aabb;
-use hdov::grid::ViewGrid;
 use hdov_testkit::audit::audit_zero_dov;
 use hdov_testkit::scenes::*;
 
 #[test]
 #[ignore = "slow audit; run with --ignored --release"]
 fn zero_dov_rate_on_a_street_scene() {
-    let scene = city_block(6, true);
+    let (scene, grid) = audit_block();
     let bounds = scene.all_object_bounds();
-    // Eye-height cells of 5 × 0.5 × 5 over the middle of the block, streets and buildings alike.
-    let grid = ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]);
     let resolution = 64;
     let dense = 32;
     let mut backend = CpuBackend::new(&scene, resolution).unwrap();

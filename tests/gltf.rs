@@ -79,30 +79,6 @@ fn data_uri(bin: &[u8]) -> String {
     format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(bin))
 }
 
-/// A `.glb`: header, JSON chunk (space-padded), BIN chunk (zero-padded).
-fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
-    let mut json = serde_json::to_vec(doc).unwrap();
-    while !json.len().is_multiple_of(4) {
-        json.push(b' ');
-    }
-    let mut bin = bin.to_vec();
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = Vec::new();
-    out.extend(b"glTF");
-    out.extend(2u32.to_le_bytes());
-    out.extend((total as u32).to_le_bytes());
-    out.extend((json.len() as u32).to_le_bytes());
-    out.extend(b"JSON");
-    out.extend(&json);
-    out.extend((bin.len() as u32).to_le_bytes());
-    out.extend(b"BIN\0");
-    out.extend(&bin);
-    out
-}
-
 fn check_scene(scene: &Scene, warnings: &[String]) {
     assert_eq!(scene.meshes.len(), 2, "the cube is stored once, beside the strip mesh");
     let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
@@ -132,7 +108,7 @@ fn gltf_and_glb_scenes_import_with_their_hierarchy_and_instances() {
     check_scene(&scene, &warnings);
     // The same as a .glb, and with the buffer in a file beside the .gltf.
     let glb_path = dir.path().join("scene.glb");
-    std::fs::write(&glb_path, glb(&document(bin.len(), None), &bin)).unwrap();
+    std::fs::write(&glb_path, hdov::export::glb(&document(bin.len(), None), &bin)).unwrap();
     let (scene, warnings) = Scene::load(&glb_path).unwrap();
     check_scene(&scene, &warnings);
     std::fs::write(dir.path().join("scene.bin"), &bin).unwrap();
@@ -185,7 +161,7 @@ fn bad_gltf_files_are_refused_in_one_line() {
         assert!(err.contains("bad.gltf") && !err.contains('\n'), "{what}: {err}");
     }
     // A .glb cut short anywhere is refused, never a panic.
-    let whole = glb(&document(bin.len(), None), &bin);
+    let whole = hdov::export::glb(&document(bin.len(), None), &bin);
     for cut in [0, 4, 11, 12, 19, 40, whole.len() / 2, whole.len() - 1] {
         let path = dir.path().join("cut.glb");
         std::fs::write(&path, &whole[..cut]).unwrap();
@@ -197,12 +173,7 @@ fn bad_gltf_files_are_refused_in_one_line() {
 /// and none panics (`assimp-testmodels`, which CI installs).
 #[test]
 fn assimp_gltf_models_load_or_are_refused() {
-    let root = Path::new("/usr/share/assimp/models/glTF2");
-    if !root.exists() {
-        assert!(std::env::var("HDOV_REQUIRE_TESTDATA").as_deref() != Ok("1"), "assimp-testmodels is required");
-        println!("skipped: no assimp-testmodels");
-        return;
-    }
+    let Some(root) = hdov_testkit::testdata::assimp_models("glTF2") else { return };
     let refused = [
         "IncorrectVertexArrays/Cube.gltf",
         "IndexOutOfRange/IndexOutOfRange.gltf",
@@ -346,12 +317,11 @@ fn glb_as_obj(glb: &Path) -> String {
 /// the same DoV: 2CylinderEngine (67 parts sharing 29 meshes) at three points among its parts.
 #[test]
 fn the_engine_from_glb_and_from_obj_agree() {
-    let glb = Path::new("/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
-    if !glb.exists() {
-        assert!(std::env::var("HDOV_REQUIRE_TESTDATA").as_deref() != Ok("1"), "assimp-testmodels is required");
-        println!("skipped: no assimp-testmodels");
+    let Some(glb) = hdov_testkit::testdata::assimp_models("glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb")
+    else {
         return;
-    }
+    };
+    let glb = glb.as_path();
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("engine.obj");
     std::fs::write(&obj, glb_as_obj(glb)).unwrap();

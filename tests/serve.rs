@@ -11,19 +11,11 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use hdov::city::{CityParams, CityScale};
-use hdov::{BackendKind, BuildParams, Database, Overwrite, Progress, QueryParams, VisibilityParams};
+use hdov::{Database, QueryParams};
 use serde_json::Value;
 
 fn tiny_city(dir: &Path) -> std::path::PathBuf {
-    let scene = hdov::city::generate(&CityParams { scale: CityScale::Tiny, ..Default::default() }).unwrap();
-    let params = BuildParams {
-        visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
-        ..Default::default()
-    };
-    let db = dir.join("db");
-    hdov::build(&scene, &db, &params, Overwrite::Never, &Progress::hidden()).unwrap();
-    db
+    hdov_testkit::scenes::tiny_city_database(dir).1
 }
 
 /// A running `hdov serve`, stopped (SIGTERM) when dropped.

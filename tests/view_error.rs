@@ -7,8 +7,8 @@ use std::collections::HashSet;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, DovBackend, IdCube};
 use hdov::{Aabb, BackendKind, BuildParams, Database, Mode, Overwrite, Progress, QueryParams, ViewGrid};
-use hdov_testkit::scenes::SceneBuilder;
-use hdov_testkit::view_error::{SplitRng, frame_error, random_viewpoint, wrong_share};
+use hdov_testkit::scenes::{Rng, SceneBuilder};
+use hdov_testkit::view_error::{frame_error, random_viewpoint, wrong_share};
 
 /// A ground slab and four boxes around a 2 × 1 × 2 grid, each on its own side, far enough apart
 /// that none can stand in front of another from any point of the grid: nothing can hide.
@@ -35,7 +35,7 @@ fn nothing_can_hide_so_nothing_is_wrong() {
     let mut truth = CpuBackend::new(&scene, 64).unwrap();
     let cube = truth.cube_map().clone();
     let mut ids = IdCube::new(64);
-    let mut rng = SplitRng::new(5);
+    let mut rng = Rng(5);
     let naive = QueryParams { mode: Mode::Naive, ..Default::default() };
     for cell in 0..grid.cell_count() {
         for _ in 0..8 {
@@ -78,7 +78,7 @@ fn an_answer_lacking_one_object_is_wrong_by_exactly_its_solid_angle() {
 #[test]
 fn viewpoints_lie_strictly_inside_and_frames_count_pixels() {
     let cell = Aabb::new(Vec3::new(0.0, 1.5, 3.0), Vec3::new(5.0, 2.0, 5.0));
-    let mut rng = SplitRng::new(9);
+    let mut rng = Rng(9);
     let points: Vec<Vec3> = (0..2000).map(|_| random_viewpoint(&cell, &mut rng)).collect();
     for p in &points {
         assert!(p.cmpgt(cell.min).all() && p.cmplt(cell.max).all(), "{p}");
@@ -87,7 +87,7 @@ fn viewpoints_lie_strictly_inside_and_frames_count_pixels() {
     let low = points.iter().filter(|p| p.x < 2.5).count();
     assert!((900..1100).contains(&low), "{low}");
     // The same seed, the same points.
-    assert_eq!(random_viewpoint(&cell, &mut SplitRng::new(9)), points[0]);
+    assert_eq!(random_viewpoint(&cell, &mut Rng(9)), points[0]);
     // Per frame: 30 of 100 object pixels show object 7, which the answer lacks.
     assert!((frame_error([(3, 70), (7, 30)], |o| o != 7) - 0.3).abs() < 1e-12);
     assert_eq!(frame_error([], |_| false), 0.0);

@@ -57,18 +57,6 @@ impl ShardDir {
     }
 }
 
-/// The size and crc32 of `base`'s tree, catalog and geometry, as a shard names them.
-fn invariant_files(base: &Database) -> Result<Vec<FileChecksum>> {
-    [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE]
-        .iter()
-        .map(|f| {
-            let p = base.dir().join(f);
-            let bytes = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-            Ok(FileChecksum { name: (*f).into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) })
-        })
-        .collect()
-}
-
 /// Merges `shards` with the scene files of `base` into a new database at `out`. An existing `out`
 /// is refused unless `overwrite` allows ours and it is an hdov database or an empty directory.
 /// The set is refused in one line unless every shard was built with the base's parameters (the
@@ -76,7 +64,10 @@ fn invariant_files(base: &Database) -> Result<Vec<FileChecksum>> {
 /// the shards cover every part exactly once. Memory: all cells' visible V-pages at once.
 pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
     let base_db = Database::open(base)?;
-    let files = invariant_files(&base_db)?;
+    let files = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE]
+        .iter()
+        .map(|f| FileChecksum::of(base, f))
+        .collect::<Result<Vec<_>>>()?;
     let base_manifest = base_db.manifest();
     let grid = base_manifest.grid.ok_or_else(|| Error::bad_file(base, "holds no viewing grid"))?;
     let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shards given"))?;

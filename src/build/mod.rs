@@ -185,8 +185,7 @@ pub fn build(
         if is_shard {
             // A shard keeps its V-data only: the scene's files are named, not stored, and the
             // merge takes them from a base build (docs/sharding.md).
-            let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-            against.push(FileChecksum { name: name.into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) });
+            against.push(FileChecksum::of(&dir, name)?);
             std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
         } else {
             let bytes = std::fs::metadata(&path).map_err(|e| Error::io(&path, e))?.len();

@@ -25,7 +25,7 @@ use axum::routing::get;
 use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
-use serde_json::{Value, json};
+use serde_json::json;
 
 use super::args::parse_vec3;
 use hdov::city::WalkKind;
@@ -235,12 +235,8 @@ fn number<T: std::str::FromStr>(what: &'static str) -> impl Fn(&str) -> Result<T
     move |s| s.parse::<T>().map_err(|_| format!("'{s}' is not {what}"))
 }
 
-async fn info(State(s): State<Arc<Served>>) -> Result<axum::Json<Value>, Reply> {
-    blocking(s, |s| {
-        let info = s.db.info().map_err(reply)?;
-        Ok(axum::Json(serde_json::to_value(info).expect("serialisable")))
-    })
-    .await
+async fn info(State(s): State<Arc<Served>>) -> Result<Response, Reply> {
+    blocking(s, |s| Ok(json_response(&s.db.info().map_err(reply)?))).await
 }
 
 const QUERY_KEYS: &[&str] = &["at", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
@@ -322,7 +318,9 @@ impl<'a> ServedItem<'a> {
     }
 }
 
-/// `value` as a JSON response, serialised once.
+/// `value` as a JSON response, serialised once and straight to text: an `f32` is written as
+/// its shortest decimal, as `--json` writes it (a `serde_json::Value` would widen it to f64's
+/// digits).
 fn json_response(value: &impl Serialize) -> Response {
     let body = serde_json::to_vec(value).expect("serialisable");
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
@@ -334,12 +332,37 @@ async fn scene(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<
     blocking(s, move |s| {
         let items = hdov::scene_items(&s.db, lod).map_err(reply)?;
         let items: Vec<ServedItem> = items.iter().map(|i| ServedItem::of(s, i)).collect();
-        Ok(json_response(&json!({ "items": items })))
+        Ok(json_response(&SceneItems { items }))
     })
     .await
 }
 
-async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<axum::Json<Value>, Reply> {
+/// `/scene`'s answer.
+#[derive(Serialize)]
+struct SceneItems<'a> {
+    items: Vec<ServedItem<'a>>,
+}
+
+/// `/walk`'s answer.
+#[derive(Serialize)]
+struct Walk<'a> {
+    steps: Vec<ServedStep<'a>>,
+}
+
+/// `/recorded-walk`'s answer: the walk's name and its viewpoints with their looks.
+#[derive(Serialize)]
+struct RecordedWalk {
+    kind: &'static str,
+    steps: Vec<RecordedStep>,
+}
+
+#[derive(Serialize)]
+struct RecordedStep {
+    at: [f32; 3],
+    look: [f32; 3],
+}
+
+async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
     let p = pairs(raw, &["kind", "steps"])?;
     let kind = value(&p, "kind", str::parse::<WalkKind>)?.unwrap_or(WalkKind::Turning);
     let steps = value(&p, "steps", number::<u32>("a count"))?.unwrap_or(300);
@@ -348,9 +371,8 @@ async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) ->
     }
     let grid = *s.db.grid().expect("checked at start");
     let path = hdov::city::walk(&grid, kind, steps as usize);
-    let steps: Vec<Value> =
-        path.iter().map(|(at, look): &(Vec3, Vec3)| json!({ "at": at.to_array(), "look": look.to_array() })).collect();
-    Ok(axum::Json(json!({ "kind": kind.name(), "steps": steps })))
+    let steps = path.iter().map(|(at, look)| RecordedStep { at: at.to_array(), look: look.to_array() }).collect();
+    Ok(json_response(&RecordedWalk { kind: kind.name(), steps }))
 }
 
 const WALK_KEYS: &[&str] = &["path", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
@@ -394,7 +416,7 @@ async fn walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<R
             held = now;
             steps.push(ServedStep { step, load, drop });
         }
-        Ok(json_response(&json!({ "steps": steps })))
+        Ok(json_response(&Walk { steps }))
     })
     .await
 }

@@ -65,6 +65,15 @@ pub struct FileChecksum {
     pub crc32: u32,
 }
 
+impl FileChecksum {
+    /// The size and crc32 of `dir/name`, as a shard names it and a merge compares it.
+    pub fn of(dir: &Path, name: &str) -> Result<FileChecksum> {
+        let path = dir.join(name);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        Ok(FileChecksum { name: name.into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) })
+    }
+}
+
 /// `manifest.json`. Its first key, `"hdov": "database"`, is the file's magic.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {

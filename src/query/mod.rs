@@ -335,8 +335,13 @@ impl Database {
     /// The column-major matrix an item's level is drawn under: its object's model matrix, or the
     /// identity for a node's internal LOD (stored in world space).
     pub fn item_transform(&self, item: &Item) -> glam::Mat4 {
-        match item.kind {
-            ItemKind::Object => self.object_transform(item.id).unwrap_or(glam::Mat4::IDENTITY),
+        self.transform_of(item.kind, item.id)
+    }
+
+    /// [`Database::item_transform`] by kind and id.
+    pub(crate) fn transform_of(&self, kind: ItemKind, id: u32) -> glam::Mat4 {
+        match kind {
+            ItemKind::Object => self.object_transform(id).unwrap_or(glam::Mat4::IDENTITY),
             ItemKind::Node => glam::Mat4::IDENTITY,
         }
     }

@@ -525,7 +525,6 @@ impl Renderer {
     }
 
     fn render_parts(&self, db: &Database, parts: &[Part], view: &View, mode: ColorMode) -> Result<Image> {
-        let catalog = db.catalog();
         // Objects share base meshes: load each stored LOD once.
         let mut meshes: HashMap<u64, Mesh> = HashMap::new();
         for p in parts {
@@ -537,10 +536,7 @@ impl Renderer {
             .iter()
             .map(|p| Drawable {
                 mesh: &meshes[&p.lod_ref.offset],
-                transform: match p.kind {
-                    ItemKind::Object => Mat4::from_cols_array(&catalog.objects[p.id as usize].transform),
-                    ItemKind::Node => Mat4::IDENTITY,
-                },
+                transform: db.transform_of(p.kind, p.id),
                 color: item_color(mode, p.kind, p.lod, p.dov),
             })
             .collect();

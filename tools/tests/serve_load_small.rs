@@ -6,9 +6,6 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use hdov::city::{CityParams, CityScale};
-use hdov::{BackendKind, BuildParams, Overwrite, Progress, VisibilityParams};
-
 #[test]
 fn serve_load_answers_every_request_as_the_library_does() {
     // `hdov` beside this package's programs (cargo test --workspace builds both into one folder).
@@ -20,13 +17,7 @@ fn serve_load_answers_every_request_as_the_library_does() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let scene = hdov::city::generate(&CityParams { scale: CityScale::Tiny, ..Default::default() }).unwrap();
-    let params = BuildParams {
-        visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
-        ..Default::default()
-    };
-    let db = dir.path().join("db");
-    hdov::build(&scene, &db, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+    let (_, db) = hdov_testkit::scenes::tiny_city_database(dir.path());
     let out = Command::new(env!("CARGO_BIN_EXE_serve-load"))
         .args([db.to_str().unwrap(), "--clients", "8", "--requests", "2000", "--hdov", hdov.to_str().unwrap()])
         .output()

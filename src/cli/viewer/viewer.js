@@ -134,6 +134,7 @@ function key(item) {
   return `${item.kind}:${item.id}:${item.lod}`;
 }
 
+/** Draws exactly `items`. Called only through the `pending` chain, so never twice at once. */
 async function show(items) {
   const mode = colourSelect.value;
   const wanted = new Map(items.map((i) => [key(i), i]));
@@ -154,13 +155,6 @@ async function show(items) {
     scene.add(mesh);
     drawn.set(k, { mesh, item });
   }));
-  // A mesh of the old answer may be in the list twice if a flip came meanwhile: keep one.
-  for (const [k, d] of drawn) {
-    if (!wanted.has(k)) {
-      scene.remove(d.mesh);
-      drawn.delete(k);
-    }
-  }
 }
 
 function recolour() {

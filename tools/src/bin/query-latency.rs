@@ -17,6 +17,7 @@ use hdov::{Database, QueryParams, SessionParams};
 use hdov_storage::{LayoutKind, PolicyKind};
 
 use hdov_testkit::bench as common;
+use hdov_tools::experiments::quantile;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -152,12 +153,6 @@ fn avenue_latency(db: &Database, n: usize) -> hdov::Result<Row> {
     }
     let per = |x: u64| x as f64 / n as f64;
     Ok(Row { micros, pages: per(pages), nodes: f64::NAN, items: per(items), slowest: None })
-}
-
-/// The `q`-quantile of sorted `v` (nearest rank).
-fn quantile(v: &[f64], q: f64) -> f64 {
-    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-    v[rank - 1]
 }
 
 fn print_row(scale: CityScale, name: &str, row: &Row) {

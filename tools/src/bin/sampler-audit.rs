@@ -7,7 +7,7 @@
 //!
 //! `cargo run --release -p hdov-tools --bin sampler-audit -- SCENE [R] [SHARD I/N] [DENSE] [SAMPLERS]`
 //!
-//! SCENE: `audit` (tests/dov_audit.rs's street block), `fence` (a picket fence of bars 0.25–8
+//! SCENE: `street` (issue 22's street), `audit` (tests/dov_audit.rs's street block), `fence` (a picket fence of bars 0.25–8
 //! texels wide in front of small objects) or `city` (the default generated city). SHARD picks the
 //! cells the truth is taken for (it costs DENSE cube maps per cell); the samplers run on the whole
 //! grid, as a build does, so their costs per cell are a whole build's. SAMPLERS: comma-separated
@@ -26,14 +26,10 @@
 
 use std::time::Instant;
 
-use glam::Vec3;
-use hdov::city::{CityParams, CityScale};
 use hdov::dov::adaptive::AdaptiveSampling;
 use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, precompute_shard};
 use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
-use hdov::geom::Aabb;
-use hdov::grid::ViewGrid;
 use hdov_testkit::audit::{DENSE_HALTON_START, dense_cells};
 
 /// One row of the table: a way of sampling.
@@ -164,19 +160,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Sampler::parse(name).map(|x| (x, on_shard))
         })
         .collect::<Result<_, _>>()?;
-    let (scene, grid) = match scene_name {
-        "audit" => (
-            hdov_testkit::scenes::city_block(6, true),
-            ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
-        ),
-        "fence" => hdov_testkit::scenes::picket_fence(r),
-        "city" => {
-            let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
-            let grid = scene.grid.ok_or("the city brings a grid")?;
-            (scene, grid)
-        }
-        other => return Err(format!("unknown scene '{other}': expected audit, fence or city").into()),
-    };
+    let (scene, grid) = hdov_testkit::scenes::audit_scene(scene_name, r)?;
     println!("{}", hdov_tools::machine());
     let bounds = scene.all_object_bounds();
     let shape = flat_shape(bounds.len());

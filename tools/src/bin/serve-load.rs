@@ -24,6 +24,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use hdov::{Database, QueryParams};
+use hdov_testkit::scenes::Rng;
+use hdov_tools::experiments::quantile;
 
 /// One keep-alive HTTP/1.1 connection.
 struct Client {
@@ -75,21 +77,6 @@ fn rss(pid: u32) -> (u64, u64) {
             .unwrap_or(0)
     };
     (field("VmRSS:"), field("VmHWM:"))
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
-
-/// xorshift64*: a seeded stream of viewpoints, the same every run.
-fn next(state: &mut u64) -> f32 {
-    *state ^= *state >> 12;
-    *state ^= *state << 25;
-    *state ^= *state >> 27;
-    (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
 }
 
 /// The items of an answer as the checks compare them: kind, id, level and DoV.
@@ -145,11 +132,12 @@ fn main() {
                 let (db, grid, done, errors) = (&db, &grid, &done, &errors);
                 s.spawn(move || {
                     let mut client = Client::connect(addr);
-                    let mut seed = 0x9e37_79b9_7f4a_7c15u64 ^ (c as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+                    // A seeded stream per client, the same every run.
+                    let mut rng = Rng(c as u64 + 1);
                     let (mut queries, mut meshes) = (Vec::new(), Vec::new());
                     while done.fetch_add(2, Ordering::Relaxed) < requests {
                         let r = grid.region;
-                        let at = r.min + (r.max - r.min) * Vec3::new(next(&mut seed), next(&mut seed), next(&mut seed));
+                        let at = r.min + (r.max - r.min) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
                         let t = Instant::now();
                         let (status, body) = client.get(&format!("/query?at={},{},{}", at.x, at.y, at.z));
                         queries.push(t.elapsed().as_secs_f64() * 1e3);
@@ -163,7 +151,7 @@ fn main() {
                             if items.is_empty() {
                                 continue;
                             }
-                            let k = (next(&mut seed) * items.len() as f32) as usize % items.len();
+                            let k = (rng.next_f32() * items.len() as f32) as usize % items.len();
                             let t = Instant::now();
                             let (status, _) = client.get(items[k]["mesh"].as_str().unwrap_or("/"));
                             meshes.push(t.elapsed().as_secs_f64() * 1e3);
@@ -186,7 +174,7 @@ fn main() {
                             continue;
                         }
                         let Some(k) = (!expected.items.is_empty())
-                            .then(|| (next(&mut seed) * expected.items.len() as f32) as usize % expected.items.len())
+                            .then(|| (rng.next_f32() * expected.items.len() as f32) as usize % expected.items.len())
                         else {
                             continue;
                         };
@@ -210,27 +198,20 @@ fn main() {
     unsafe { libc::kill(server.id() as i32, libc::SIGTERM) };
     let _ = server.wait();
 
-    let mut queries: Vec<f64> = per_client.iter().flat_map(|c| c.0.iter().copied()).collect();
-    let mut meshes: Vec<f64> = per_client.iter().flat_map(|c| c.1.iter().copied()).collect();
-    queries.sort_by(f64::total_cmp);
-    meshes.sort_by(f64::total_cmp);
+    let queries: Vec<f64> = per_client.iter().flat_map(|c| c.0.iter().copied()).collect();
+    let meshes: Vec<f64> = per_client.iter().flat_map(|c| c.1.iter().copied()).collect();
     let total = queries.len() + meshes.len();
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!("{} clients, {total} requests in {wall:.2} s: {:.0} requests/s", clients, total as f64 / wall);
-    println!(
-        "query: {} requests, p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
-        queries.len(),
-        percentile(&queries, 0.5),
-        percentile(&queries, 0.99),
-        queries.last().copied().unwrap_or(f64::NAN)
-    );
-    println!(
-        "mesh:  {} requests, p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
-        meshes.len(),
-        percentile(&meshes, 0.5),
-        percentile(&meshes, 0.99),
-        meshes.last().copied().unwrap_or(f64::NAN)
-    );
+    for (route, ms) in [("query:", &queries), ("mesh: ", &meshes)] {
+        let max = ms.iter().copied().fold(f64::NAN, f64::max);
+        println!(
+            "{route} {} requests, p50 {:.2} ms, p99 {:.2} ms, max {max:.2} ms",
+            ms.len(),
+            quantile(ms, 0.5),
+            quantile(ms, 0.99)
+        );
+    }
     println!(
         "server RSS: idle {} MB, peak {} MB ({:.2}x); errors {}; load average {}",
         idle / 1024,

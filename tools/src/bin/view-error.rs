@@ -33,16 +33,15 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use glam::Vec3;
-use hdov::city::{CityParams, CityScale};
 use hdov::dov::sampling::is_inside;
 use hdov::dov::{DovBackend, IdCube};
-use hdov::grid::ViewGrid;
 use hdov::render::{ColorMode, NO_ITEM, Renderer, View};
-use hdov::scene::Scene;
 use hdov::{BackendKind, BuildParams, Database, FloorTest, Mode, Overwrite, Progress, QueryParams, Sampling};
 use hdov::{ItemKind, VisibilityParams};
-use hdov_testkit::view_error::{SplitRng, dov_excess, frame_error, quantile, random_viewpoint, wrong_share};
+use hdov_testkit::scenes::Rng;
+use hdov_testkit::view_error::{dov_excess, frame_error, random_viewpoint, wrong_share};
 use hdov_tools::experiments::charts::{Panel, Series, write_svg};
+use hdov_tools::experiments::quantile;
 
 /// What the truth sees from one viewpoint.
 struct Viewpoint {
@@ -70,24 +69,6 @@ struct Row {
 /// A viewpoint's wrong share, its index, and the lacking objects behind it (name, share).
 type Worst = (f64, usize, Vec<(String, f64)>);
 
-fn scene_of(name: &str, r: u32) -> Result<(Scene, ViewGrid), String> {
-    Ok(match name {
-        "street" => hdov_testkit::scenes::street_with_gaps(),
-        "audit" => (
-            hdov_testkit::scenes::city_block(6, true),
-            ViewGrid::new(hdov::Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]),
-        ),
-        "fence" => hdov_testkit::scenes::picket_fence(r),
-        "city" => {
-            let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })
-                .map_err(|e| e.to_string())?;
-            let grid = scene.grid.ok_or("the city brings a grid")?;
-            (scene, grid)
-        }
-        other => return Err(format!("unknown scene '{other}': street, audit, fence or city")),
-    })
-}
-
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).cloned();
@@ -99,16 +80,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let r: u32 = flag("--resolution").map_or(Ok(128), |s| s.parse())?;
     let truth_r: u32 = flag("--truth").map_or(Ok(256), |s| s.parse())?;
     let frames = args.iter().any(|a| a == "--frames");
-    let (mut scene, grid) = scene_of(&scene_name, r)?;
+    let (mut scene, grid) = hdov_testkit::scenes::audit_scene(&scene_name, r)?;
     scene.grid = Some(grid);
     println!("{}", hdov_tools::machine());
 
     // Cells: all, or a seeded subset.
-    let mut rng = SplitRng::new(seed);
+    let mut rng = Rng(seed);
     let mut cells: Vec<usize> = (0..grid.cell_count()).collect();
     if let Some(n) = flag("--cells").map(|s| s.parse::<usize>()).transpose()? {
         for i in (1..cells.len()).rev() {
-            cells.swap(i, (rng.next_f64() * (i + 1) as f64) as usize);
+            cells.swap(i, ((rng.next_f32() * (i + 1) as f32) as usize).min(i));
         }
         cells.truncate(n);
         cells.sort_unstable();
@@ -188,7 +169,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if frames && k == 0 {
             draw_frames(&db, &mut views, seed)?;
         }
-        let texel = (2.0 / f64::from(r)).powi(2) / (4.0 * std::f64::consts::PI);
+        let texel = hdov::dov::CubeMap::new(r).texel_floor();
         let naive = QueryParams { mode: Mode::Naive, ..Default::default() };
         let mut row =
             Row { sampler: name.clone(), seconds, shares: vec![], frames: vec![], excess: (0, 0), worst: vec![] };
@@ -240,7 +221,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             row.seconds,
             row.seconds / base,
             mean,
-            quantile(&mut row.shares.clone(), 0.99),
+            quantile(&row.shares, 0.99),
             max,
             row.shares.len(),
             100.0 * row.excess.0 as f64 / row.excess.1.max(1) as f64
@@ -304,12 +285,12 @@ fn draw_frames(db: &Database, views: &mut [Viewpoint], seed: u64) -> Result<(), 
             return Ok(());
         }
     };
-    let mut rng = SplitRng::new(seed ^ 0xf4a3e);
+    let mut rng = Rng(seed ^ 0xf4a3e);
     for v in views.iter_mut() {
-        let z = 2.0 * rng.next_f64() - 1.0;
-        let phi = std::f64::consts::TAU * rng.next_f64();
+        let z = rng.range(-1.0, 1.0);
+        let phi = rng.range(0.0, std::f32::consts::TAU);
         let s = (1.0 - z * z).sqrt();
-        let look = Vec3::new((s * phi.cos()) as f32, z as f32, (s * phi.sin()) as f32);
+        let look = Vec3::new(s * phi.cos(), z, s * phi.sin());
         let image = renderer.render_full(db, &View::new(v.at, look, 45.0, 1024, 1024), ColorMode::Shaded)?;
         let mut pixels: HashMap<u32, usize> = HashMap::new();
         for &id in image.ids.iter().filter(|&&id| id != NO_ITEM) {

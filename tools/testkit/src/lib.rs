@@ -6,10 +6,12 @@
 //! - [`gpu`]: skipping GPU tests where no adapter exists, unless CI requires one;
 //! - [`audit`]: the DoV audits (backend agreement, the dense from-region reference, floor tests);
 //! - [`bench`]: the query benchmarks' database fixture and viewpoints;
-//! - [`view_error`]: from-region error as a user sees it (wrong share of a view, per frame).
+//! - [`view_error`]: from-region error as a user sees it (wrong share of a view, per frame);
+//! - [`testdata`]: assimp's test models and the glTF-Validator, skipped or required.
 
 pub mod audit;
 pub mod bench;
 pub mod gpu;
 pub mod scenes;
+pub mod testdata;
 pub mod view_error;

@@ -318,3 +318,40 @@ pub fn picket_fence(r: u32) -> (Scene, ViewGrid) {
     b.aabox(Vec3::new(-30.0, 0.0, fence_z + 16.0), Vec3::new(40.0, 5.0, fence_z + 16.5));
     (b.build(), grid)
 }
+
+/// The street block of the from-region audits ([`city_block`] with props) and its grid: eye-height
+/// cells of 5 × 0.5 × 5 over the middle of the block, streets and buildings alike.
+pub fn audit_block() -> (Scene, ViewGrid) {
+    let grid = ViewGrid::new(Aabb::new(Vec3::new(20.0, 1.5, 20.0), Vec3::new(80.0, 2.0, 80.0)), [12, 1, 12]);
+    (city_block(6, true), grid)
+}
+
+/// The from-region audit scenes by name, with their grids: `street` ([`street_with_gaps`]),
+/// `audit` ([`audit_block`]), `fence` ([`picket_fence`], its bars sized for cube maps of
+/// resolution `r`) or `city` (the default generated city, seed 1).
+pub fn audit_scene(name: &str, r: u32) -> Result<(Scene, ViewGrid), String> {
+    Ok(match name {
+        "street" => street_with_gaps(),
+        "audit" => audit_block(),
+        "fence" => picket_fence(r),
+        "city" => {
+            let params = hdov::city::CityParams { seed: 1, ..Default::default() };
+            let scene = hdov::city::generate(&params).map_err(|e| e.to_string())?;
+            let grid = scene.grid.ok_or("the city brings a grid")?;
+            (scene, grid)
+        }
+        other => return Err(format!("unknown scene '{other}': street, audit, fence or city")),
+    })
+}
+
+/// The tiny generated city (default seed) built into `dir/db` with the CPU backend at R = 16:
+/// a whole database in about a second. Returns the scene and the database's directory.
+pub fn tiny_city_database(dir: &std::path::Path) -> (Scene, std::path::PathBuf) {
+    let params = hdov::city::CityParams { scale: hdov::city::CityScale::Tiny, ..Default::default() };
+    let scene = hdov::city::generate(&params).unwrap();
+    let visibility = hdov::VisibilityParams { resolution: 16, backend: hdov::BackendKind::Cpu, ..Default::default() };
+    let build = hdov::BuildParams { visibility: Some(visibility), ..Default::default() };
+    let db = dir.join("db");
+    hdov::build(&scene, &db, &build, hdov::Overwrite::Never, &hdov::Progress::hidden()).unwrap();
+    (scene, db)
+}

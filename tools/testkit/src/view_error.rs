@@ -5,7 +5,7 @@
 //!
 //! - [`wrong_share`]: over a cube map, by solid angle;
 //! - [`frame_error`]: over one rendered frame, by pixels (GVS++'s erroneous-pixel measure);
-//! - [`random_viewpoint`]: a uniformly random point strictly inside a cell, seeded;
+//! - [`random_viewpoint`]: a uniformly random point strictly inside a cell, from a seeded [`Rng`];
 //! - [`dov_excess`]: how often a point's DoV exceeds the cell's stored DoV.
 
 use std::collections::HashMap;
@@ -13,6 +13,8 @@ use std::collections::HashMap;
 use glam::Vec3;
 use hdov::dov::{CubeMap, IdCube, PointDov};
 use hdov::geom::Aabb;
+
+use crate::scenes::Rng;
 
 /// What a viewpoint sees that an answer lacks.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -69,34 +71,13 @@ pub fn frame_error(pixels: impl IntoIterator<Item = (u32, usize)>, answer_has: i
     if seen == 0 { 0.0 } else { wrong as f64 / seen as f64 }
 }
 
-/// xorshift64*: the same stream for the same seed on every machine.
-pub struct SplitRng(u64);
-
-impl SplitRng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Uniformly random points strictly inside `cell` (kept 0.1 % of each edge from its faces, so
 /// never on a corner, a face or a neighbour's border), from `rng`. Unlike the build's sample
 /// points (corners and Halton points), they follow no pattern a sampler could have matched.
-pub fn random_viewpoint(cell: &Aabb, rng: &mut SplitRng) -> Vec3 {
+pub fn random_viewpoint(cell: &Aabb, rng: &mut Rng) -> Vec3 {
     let margin = cell.extent() * 1e-3;
     let (lo, hi) = (cell.min + margin, cell.max - margin);
-    Vec3::new(
-        lo.x + (hi.x - lo.x) * rng.next_f64() as f32,
-        lo.y + (hi.y - lo.y) * rng.next_f64() as f32,
-        lo.z + (hi.z - lo.z) * rng.next_f64() as f32,
-    )
+    Vec3::new(rng.range(lo.x, hi.x), rng.range(lo.y, hi.y), rng.range(lo.z, hi.z))
 }
 
 /// Of the objects `point` sees, how many it sees with more DoV than `stored` (the cell's DoV of
@@ -111,13 +92,4 @@ pub fn dov_excess(
 ) -> (usize, usize) {
     let exceeding = point.objects.iter().filter(|&&(o, d)| d > stored(o) + texels * texel + relative * d).count();
     (exceeding, point.objects.len())
-}
-
-/// `p`-quantile of `values` (sorted here), nearest rank; NaN when empty.
-pub fn quantile(values: &mut [f64], p: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    values[((values.len() - 1) as f64 * p).round() as usize]
 }
