@@ -111,6 +111,8 @@ pub enum Param {
     Scale,
     /// The scene.
     Scene,
+    /// The base build a shard is measured against.
+    Base,
     /// The part of the grid a build computes.
     Shard,
     /// The shard databases a merge joins.
@@ -160,6 +162,7 @@ impl Param {
             Param::Samples => "samples",
             Param::Scale => "scale",
             Param::Scene => "scene",
+            Param::Base => "base",
             Param::Shard => "shard",
             Param::Shards => "shards",
             Param::Size => "size",

@@ -123,3 +123,18 @@ impl Aabb {
 pub fn max_scale(m: &Mat4) -> f32 {
     [m.x_axis, m.y_axis, m.z_axis].into_iter().map(|a| a.truncate().length()).fold(0.0, f32::max)
 }
+
+/// The Morton (Z-order) code of a point of the unit cube (coordinates clamped to [0, 1]), 10
+/// bits per axis: nearby points mostly get nearby codes, so sorting by it groups space.
+pub fn morton3(p: Vec3) -> u32 {
+    // Spreads the low 10 bits of `v` to every third bit.
+    fn spread(v: u32) -> u32 {
+        let mut v = v & 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    let q = |x: f32| (x.clamp(0.0, 1.0) * 1023.0) as u32;
+    spread(q(p.x)) | (spread(q(p.y)) << 1) | (spread(q(p.z)) << 2)
+}

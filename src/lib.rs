@@ -65,7 +65,7 @@ pub mod city;
 pub mod render;
 pub mod review;
 
-pub use build::{BuildReport, build, merge::merge};
+pub use build::{BuildReport, build, build_shard_on, merge::merge};
 pub use camera::Camera;
 pub use db::Database;
 pub use db::info::Info;

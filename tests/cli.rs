@@ -462,7 +462,26 @@ fn shards_merge_into_the_whole_database() {
     std::fs::write(tmp.path().join("moved/city.json"), serde_json::to_vec(&city).unwrap()).unwrap();
     base_of(&s("moved/city.json"), &s("base5"), "1024");
     assert_refused(&merge("base5", ["shard0", "shard1", "shard2"], "m9"), "measured against another scene");
-    for m in ["m2", "m3", "m4", "m5", "m8", "m9"] {
+    // A shard built on the base (`--base`: no tree, LODs or catalog of its own) is the same
+    // shard, file for file; a base of other parameters or of another scene is refused.
+    build(&s("on-base1"), &["--shard", "1/3", "--base", &s("base")]);
+    assert_eq!(names("shard1"), names("on-base1"));
+    for f in names("shard1") {
+        let (a, b) = (
+            std::fs::read(tmp.path().join("shard1").join(&f)).unwrap(),
+            std::fs::read(tmp.path().join("on-base1").join(&f)).unwrap(),
+        );
+        assert!(a == b || f == "manifest.json", "{f} differs between the shard and the shard built on the base");
+    }
+    assert_eq!(manifest("shard1"), manifest("on-base1"));
+    let on_base = |base: &str, out: &str| {
+        let mut args = vec!["build", scene.as_str(), "--out", out, "--shard", "1/3", "--base", base];
+        args.extend_from_slice(&common);
+        hdov(&args)
+    };
+    assert_refused(&on_base(&s("base5"), &s("m10")), "another scene");
+    assert_refused(&on_base(&s("base-512"), &s("m11")), "other parameters");
+    for m in ["m2", "m3", "m4", "m5", "m8", "m9", "m10", "m11"] {
         assert!(!tmp.path().join(m).exists(), "{m}");
     }
 }

@@ -5,14 +5,14 @@
 //! one build names the same files). The merge takes those files from a base build of the same
 //! scene and parameters (`hdov build --no-visibility`), checks that every shard was measured
 //! against exactly them and that the shards cover every cell once, reads each shard's cells from
-//! one of its layouts and writes all layouts anew.
+//! one of its layouts, cell by cell, into every layout written anew.
 
 use std::path::{Path, PathBuf};
 
-use hdov_storage::{Layout, ReadMode, VData};
+use hdov_storage::{Layout, LayoutWriter, ReadMode, VShape};
 
-use super::vpages::read_cells;
-use super::{VisibilityParams, begin_write, write_layouts, write_manifest};
+use super::vpages::for_each_cell;
+use super::{VisibilityParams, begin_write, layout_info, layout_options, write_manifest};
 use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
@@ -61,7 +61,8 @@ impl ShardDir {
 /// is refused unless `overwrite` allows ours and it is an hdov database or an empty directory.
 /// The set is refused in one line unless every shard was built with the base's parameters (the
 /// shard aside) and grid, was measured against the base's very tree, catalog and geometry, and
-/// the shards cover every part exactly once. Memory: all cells' visible V-pages at once.
+/// the shards cover every part exactly once. Memory: one cell's V-pages and the layout
+/// writers' buffers (one page per node for horizontal); the scene files are copied, not read.
 pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
     let base_db = Database::open(base)?;
     let files = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE]
@@ -103,17 +104,24 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
 
     let txn = begin_write(out, overwrite)?;
     for f in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
-        let (from, to) = (base.join(f), txn.path().join(f));
-        let bytes = std::fs::read(&from).map_err(|e| Error::io(&from, e))?;
-        hdov_storage::write_file_synced(&to, &bytes)?;
+        hdov_storage::copy_file_synced(&base.join(f), &txn.path().join(f))?;
     }
-    let mut data = VData {
+    // Every cell, in order, goes straight from its shard's layout into every new layout: the
+    // merge holds one cell's V-pages and the writers' buffers, whatever the grid. The V-entry
+    // width is fixed before the first cell: 4-byte NVOs where any shard needed them, as a
+    // whole build would have chosen from the same NVOs.
+    let wide = dirs.iter().any(|s| s.layout.codec().nvo_bytes > 2);
+    let shape = VShape {
         cell_count: grid.cell_count() as u32,
         node_fanout: (0..base_db.node_count())
             .map(|id| base_db.node(id).map(|p| p.node.entries.len() as u16))
             .collect::<Result<_>>()?,
-        cells: vec![Vec::new(); grid.cell_count()],
+        nvo_max: if wide { u32::MAX } else { u32::from(u16::MAX) },
     };
+    let opts = layout_options(base_manifest.build.page_size, first.params.dov_codec);
+    let kinds = &first.params.layouts;
+    let mut writers =
+        kinds.iter().map(|&k| LayoutWriter::create(txn.path(), k, &shape, &opts)).collect::<Result<Vec<_>, _>>()?;
     let mut info = VisibilityInfo {
         cells_computed: 0,
         sample_points: 0,
@@ -122,19 +130,29 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         seconds: 0.0,
         ..first.info.clone()
     };
-    for s in &dirs {
+    let mut in_order: Vec<&ShardDir> = dirs.iter().collect();
+    in_order.sort_by_key(|s| s.shard.index);
+    let mut next = 0;
+    for s in in_order {
         let range = s.shard.cells(&grid);
-        for (cell, pages) in read_cells(&s.layout, range.start as u32..range.end as u32)? {
-            data.cells[cell as usize] = pages;
+        if range.start != next {
+            return Err(Error::bad_file(&s.path, format!("starts at cell {}, not {next}", range.start)));
         }
+        next = range.end;
+        for_each_cell(&s.layout, range.start as u32..range.end as u32, |_, pages| {
+            writers.iter_mut().try_for_each(|w| w.push_cell(&pages)).map_err(Error::from)
+        })?;
         info.cells_computed += s.info.cells_computed;
         info.sample_points += s.info.sample_points;
         info.floored_objects += s.info.floored_objects;
         info.skipped_points += s.info.skipped_points;
         info.seconds += s.info.seconds;
     }
-    let page_size = base_manifest.build.page_size;
-    info.layouts = write_layouts(txn.path(), &first.params.layouts, &data, page_size, first.params.dov_codec)?;
+    info.layouts = kinds
+        .iter()
+        .zip(writers)
+        .map(|(&kind, w)| Ok(layout_info(kind, w.finish()?)))
+        .collect::<Result<_>>()?;
     let mut manifest = base_manifest.clone();
     manifest.build.visibility = Some(VisibilityParams { shard: None, ..first.params.clone() });
     manifest.visibility = Some(info);

@@ -3,9 +3,11 @@
 //! the database only when every file is complete and synced ([`hdov_storage::DirTxn`]).
 //!
 //! - [`params`]: what a build takes, with its bounds, checked before any work;
+//! - `lods`: leaf and internal LODs, streamed into the geometry file as they are built;
 //! - [`vpages`]: from per-cell DoV to V-pages and back;
 //! - [`merge`]: shard databases joined into one.
 
+mod lods;
 pub mod merge;
 pub mod vpages;
 
@@ -26,7 +28,7 @@ use crate::format::{
     MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
 };
 use crate::grid::ViewGrid;
-use crate::lod::{LodLevel, build_scene_lods};
+use crate::lod::LodLevel;
 use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
@@ -75,8 +77,7 @@ pub fn build(
     overwrite: Overwrite,
     progress: &Progress,
 ) -> Result<BuildReport> {
-    scene.check().map_err(|r| Error::bad_param(Param::Scene, r))?;
-    params.check(scene.grid.as_ref())?;
+    check_inputs(scene, params)?;
     let fanout = params.max_entries();
     // Claim the target first: a refusal must come before minutes of work, not after.
     let txn = begin_write(out, overwrite)?;
@@ -88,44 +89,24 @@ pub fn build(
     let tree_seconds = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
+    let dir = txn.path().to_path_buf();
+    let geometry_path = dir.join(GEOMETRY_FILE);
+    let mut geometry = BlobWriter::create(&geometry_path, GEOMETRY_KIND)?;
     let bar = progress.bar("LODs", (scene.meshes.len() + tree.nodes.len()) as u64);
-    let lods = build_scene_lods(scene, &tree, &params.lod, &bar);
+    let stored = lods::build_and_store(scene, &tree, &params.lod, &dir, &mut geometry, &geometry_path, &bar)?;
     bar.finish_and_clear();
+    geometry.finish()?;
     let lod_seconds = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let dir = txn.path().to_path_buf();
-    let mut geometry = BlobWriter::create(&dir.join(GEOMETRY_FILE), GEOMETRY_KIND)?;
-    let mut store_chain = |chain: &[LodLevel]| -> Result<Vec<LodRef>> {
-        chain
-            .iter()
-            .map(|level| {
-                let bytes = crate::record::encode(&level.mesh, &dir.join(GEOMETRY_FILE))?;
-                let r = geometry.append(&bytes)?;
-                Ok(LodRef { faces: level.faces() as u32, error: level.error, offset: r.offset, len: r.len })
-            })
-            .collect()
-    };
     let ladder = crate::lod::hlod::ErrorLadder::of(scene);
-    let mesh_lods = lods.leaf.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
-    let node_lods = lods.internal.iter().map(|c| store_chain(c)).collect::<Result<Vec<_>>>()?;
-    geometry.finish()?;
-    // The meshes are on disk now; the DoV stage needs the memory more, and at most the leaf
-    // chains (for LOD-aware drawing on the GPU).
+    // Drawing by LOD on the GPU needs the leaf chains in memory; nothing else does.
     let draws_lods =
         params.visibility.as_ref().is_some_and(|v| v.backend != BackendKind::Cpu && v.lod_draw_tolerance > 0.0);
-    let leaf_lods = draws_lods.then_some(lods.leaf);
-    drop(lods.internal);
+    let leaf_lods = if draws_lods { Some(stored.leaf_chains(&geometry_path)?) } else { None };
+    let lods::StoredLods { mesh_lods, node_lods, .. } = stored;
 
-    let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, params.page_size)?;
-    let objects_under = tree.subtree_object_counts();
-    let leaves_under = tree.subtree_leaf_counts();
-    for (id, node) in tree.nodes.iter().enumerate() {
-        let page =
-            NodePage { node: node.clone(), subtree_objects: objects_under[id], subtree_leaves: leaves_under[id] };
-        pages.push(&tree_page::encode(&page))?;
-    }
-    pages.finish()?;
+    write_tree(&dir, &tree, params.page_size)?;
 
     let catalog = Catalog {
         objects: scene
@@ -196,6 +177,96 @@ pub fn build(
     write_manifest(&dir, &manifest)?;
     txn.commit()?;
     Ok(BuildReport { manifest, tree_seconds, lod_seconds, write_seconds: t.elapsed().as_secs_f64(), cleaned, restored })
+}
+
+/// The scene, the parameters and the grid, checked before any work.
+fn check_inputs(scene: &Scene, params: &BuildParams) -> Result<()> {
+    scene.check().map_err(|r| Error::bad_param(Param::Scene, r))?;
+    params.check(scene.grid.as_ref())
+}
+
+/// Writes `tree.pages`: one node per page, in node-id order.
+fn write_tree(dir: &Path, tree: &RTree, page_size: u32) -> Result<()> {
+    let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, page_size)?;
+    let objects_under = tree.subtree_object_counts();
+    let leaves_under = tree.subtree_leaf_counts();
+    for (id, node) in tree.nodes.iter().enumerate() {
+        let page =
+            NodePage { node: node.clone(), subtree_objects: objects_under[id], subtree_leaves: leaves_under[id] };
+        pages.push(&tree_page::encode(&page))?;
+    }
+    pages.finish()?;
+    Ok(())
+}
+
+/// Builds shard `params.visibility.shard` of `scene` at `out` against the scene files of
+/// `base`, a `--no-visibility` build of the same scene and parameters, instead of building the
+/// tree, LODs and catalog again: the shard then costs its cells' visibility and the scene's
+/// BVH, not the LODs. Its files are those [`build`] writes for the shard, byte for byte.
+///
+/// `base` is refused in one line unless it was built with the same parameters (visibility
+/// aside), grid and counts, and its tree is the one `scene` gives (rebuilt here: milliseconds).
+pub fn build_shard_on(
+    scene: &Scene,
+    base: &Path,
+    out: &Path,
+    params: &BuildParams,
+    overwrite: Overwrite,
+    progress: &Progress,
+) -> Result<BuildReport> {
+    check_inputs(scene, params)?;
+    let (Some(v), Some(grid)) = (&params.visibility, &scene.grid) else {
+        return Err(Error::bad_param(Param::Base, "a base is for shard builds: give --shard I/N"));
+    };
+    if v.shard.is_none() {
+        return Err(Error::bad_param(Param::Base, "a base is for shard builds: give --shard I/N"));
+    }
+    let db = crate::db::Database::open(base)?;
+    let mut manifest = db.manifest().clone();
+    let other = |what: &str| Error::bad_file(base, format!("was built from {what} than this shard's"));
+    if (BuildParams { visibility: None, ..manifest.build.clone() }) != (BuildParams { visibility: None, ..params.clone() })
+    {
+        return Err(other("other parameters"));
+    }
+    let counts = (scene.objects.len() as u64, scene.meshes.len() as u64, scene.triangle_count(), scene.stored_triangle_count());
+    let c = &manifest.counts;
+    if manifest.grid.as_ref() != Some(grid) || (c.objects, c.base_meshes, c.triangles, c.stored_triangles) != counts {
+        return Err(other("another scene or grid"));
+    }
+    let txn = begin_write(out, overwrite)?;
+    let (cleaned, restored) = (txn.cleaned().to_vec(), txn.restored().map(Path::to_path_buf));
+    let dir = txn.path().to_path_buf();
+    let t = Instant::now();
+    let tree = RTree::build(&scene.all_object_bounds(), params.max_entries(), params.tree);
+    let tree_seconds = t.elapsed().as_secs_f64();
+    write_tree(&dir, &tree, params.page_size)?;
+    let ours = FileChecksum::of(&dir, TREE_FILE)?;
+    std::fs::remove_file(dir.join(TREE_FILE)).map_err(|e| Error::io(dir.join(TREE_FILE), e))?;
+    let against =
+        [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE].iter().map(|f| FileChecksum::of(base, f)).collect::<Result<Vec<_>>>()?;
+    if against[0] != ours {
+        return Err(Error::bad_file(base, "was built from another scene than this shard's: its tree differs"));
+    }
+    let t = Instant::now();
+    let draws_lods = v.backend != BackendKind::Cpu && v.lod_draw_tolerance > 0.0;
+    let leaf_lods = match draws_lods {
+        true => Some(
+            db.catalog()
+                .mesh_lods
+                .iter()
+                .map(|chain| chain.iter().map(|l| Ok(LodLevel { mesh: db.lod_mesh(l)?, error: l.error })).collect())
+                .collect::<Result<Vec<Vec<LodLevel>>>>()?,
+        ),
+        false => None,
+    };
+    let visibility = build_visibility(scene, &tree, leaf_lods.as_deref(), grid, v, params.page_size, &dir, progress)?;
+    manifest.build = params.clone();
+    manifest.visibility = Some(visibility);
+    manifest.files = Vec::new();
+    manifest.measured_against = Some(against);
+    write_manifest(&dir, &manifest)?;
+    txn.commit()?;
+    Ok(BuildReport { manifest, tree_seconds, lod_seconds: 0.0, write_seconds: t.elapsed().as_secs_f64(), cleaned, restored })
 }
 
 /// The view-invariant inputs of the query's stop rule, per node (see [`NodeShape`]).
@@ -324,6 +395,21 @@ pub(crate) fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
     Ok(hdov_storage::write_file_synced(&path, &json)?)
 }
 
+/// How the layouts of a database with `page_size` and `codec` are written.
+pub(crate) fn layout_options(page_size: u32, codec: hdov_storage::DovCodec) -> LayoutOptions {
+    LayoutOptions { page_size: page_size.min(hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE), dov: codec, ..Default::default() }
+}
+
+/// The manifest's entry for a written layout.
+pub(crate) fn layout_info(kind: hdov_storage::LayoutKind, size: hdov_storage::LayoutSize) -> LayoutInfo {
+    LayoutInfo {
+        name: kind.name().to_string(),
+        vpage_bytes: size.vpage_bytes,
+        index_bytes: size.index_bytes,
+        files: size.files.into_iter().map(|(name, bytes)| FileEntry { name, bytes }).collect(),
+    }
+}
+
 /// Writes every chosen layout of `data` into `dir`.
 pub(crate) fn write_layouts(
     dir: &Path,
@@ -332,21 +418,6 @@ pub(crate) fn write_layouts(
     page_size: u32,
     codec: hdov_storage::DovCodec,
 ) -> Result<Vec<LayoutInfo>> {
-    let opts = LayoutOptions {
-        page_size: page_size.min(hdov_storage::layout::MAX_LAYOUT_PAGE_SIZE),
-        dov: codec,
-        ..Default::default()
-    };
-    kinds
-        .iter()
-        .map(|&kind| {
-            let size = write_layout(dir, kind, data, &opts)?;
-            Ok(LayoutInfo {
-                name: kind.name().to_string(),
-                vpage_bytes: size.vpage_bytes,
-                index_bytes: size.index_bytes,
-                files: size.files.into_iter().map(|(name, bytes)| FileEntry { name, bytes }).collect(),
-            })
-        })
-        .collect()
+    let opts = layout_options(page_size, codec);
+    kinds.iter().map(|&kind| Ok(layout_info(kind, write_layout(dir, kind, data, &opts)?))).collect()
 }

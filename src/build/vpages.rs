@@ -59,12 +59,16 @@ pub fn vdata_from_cells(tree: &RTree, cell_count: u32, cells: &[(u32, CellDov)])
 /// The visible V-pages of one cell: (node id, V-entries), ascending node id.
 pub type CellVPages = Vec<(u32, Vec<VEntry>)>;
 
-/// Reads the V-pages of `cells` back from a layout (for merging shard databases), through a
-/// cursor and an uncached page reader of its own.
-pub fn read_cells(layout: &Layout, cells: std::ops::Range<u32>) -> Result<Vec<(u32, CellVPages)>> {
+/// Reads the V-pages of `cells` back from a layout, one cell at a time into `each(cell, its
+/// V-pages)` (for merging shard databases), through a cursor and an uncached page reader of
+/// its own.
+pub fn for_each_cell(
+    layout: &Layout,
+    cells: std::ops::Range<u32>,
+    mut each: impl FnMut(u32, CellVPages) -> Result<()>,
+) -> Result<()> {
     let mut reader = PageReader::uncached();
     let mut cursor = layout.cursor();
-    let mut out = Vec::with_capacity(cells.len());
     for cell in cells {
         cursor.flip_to_cell(cell, &mut reader)?;
         // Vertical layouts name the nodes they store; horizontal is asked node by node.
@@ -75,7 +79,7 @@ pub fn read_cells(layout: &Layout, cells: std::ops::Range<u32>) -> Result<Vec<(u
                 pages.push((node, v));
             }
         }
-        out.push((cell, pages));
+        each(cell, pages)?;
     }
-    Ok(out)
+    Ok(())
 }

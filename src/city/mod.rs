@@ -13,7 +13,7 @@
 //!   (`detail.rs`): the user's model, normalised to statue size, or a procedural figure of 69,312
 //!   triangles;
 //! - a viewing-cell grid over the whole footprint at eye height (y 1.5–2.0 m, one layer), with
-//!   cells of 30–50 m: `tiny` ≈ 40 cells, `small` ≈ 220, `default` ≈ 840, `large` ≈ 4,200.
+//!   cells of 30–50 m: `tiny` ≈ 40 cells, `small` ≈ 220, `default` ≈ 840, `large` ≈ 4,200, `huge` ≈ 42,000.
 //!
 //! **Storage.** Every building is its own base mesh (so buildings differ, as in a real city, and
 //! each gets its own leaf LODs), instanced once under a translation (and possibly a half turn)
@@ -74,11 +74,16 @@ pub enum CityScale {
     /// 30 × 30 blocks: about 11,300 objects and 37 M triangles over instances (11 M stored), the
     /// thesis's scale.
     Large,
+    /// 96 × 96 blocks: about 116,000 objects and 380 M triangles over instances (about 115 M
+    /// stored), ten times the thesis's: for the memory-bounded build and sharded visibility
+    /// (docs/sharding.md); one machine does not measure its grid's visibility in a day.
+    Huge,
 }
 
 impl CityScale {
     /// Every scale, smallest first.
-    pub const ALL: [CityScale; 4] = [CityScale::Tiny, CityScale::Small, CityScale::Default, CityScale::Large];
+    pub const ALL: [CityScale; 5] =
+        [CityScale::Tiny, CityScale::Small, CityScale::Default, CityScale::Large, CityScale::Huge];
 
     /// Blocks along x and z.
     pub fn blocks(self) -> [u32; 2] {
@@ -87,6 +92,7 @@ impl CityScale {
             CityScale::Small => [6, 6],
             CityScale::Default => [13, 13],
             CityScale::Large => [30, 30],
+            CityScale::Huge => [96, 96],
         }
     }
 
@@ -98,6 +104,8 @@ impl CityScale {
             CityScale::Small => 200.0,
             CityScale::Default => 800.0,
             CityScale::Large => 4096.0,
+            // The large city's cell size (about 47 m) over 10.24 times its footprint.
+            CityScale::Huge => 4096.0 * (96.0 * 96.0) / (30.0 * 30.0),
         }
     }
 
@@ -108,6 +116,7 @@ impl CityScale {
             CityScale::Small => "small",
             CityScale::Default => "default",
             CityScale::Large => "large",
+            CityScale::Huge => "huge",
         }
     }
 }
@@ -123,7 +132,7 @@ impl FromStr for CityScale {
 
     fn from_str(s: &str) -> Result<Self, Error> {
         CityScale::ALL.into_iter().find(|scale| scale.name().eq_ignore_ascii_case(s)).ok_or_else(|| {
-            Error::bad_param(Param::Scale, format!("unknown scale '{s}': expected tiny, small, default or large"))
+            Error::bad_param(Param::Scale, format!("unknown scale '{s}': expected tiny, small, default, large or huge"))
         })
     }
 }

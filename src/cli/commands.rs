@@ -108,6 +108,10 @@ pub struct VisibilityArgs {
     /// --no-visibility base build: `hdov merge BASE SHARDS… --out DB`).
     #[arg(long)]
     shard: Option<Shard>,
+    /// With --shard: measure against the tree, LODs and catalog of this --no-visibility base
+    /// build instead of building them again (the shard then costs only its cells' visibility).
+    #[arg(long, requires = "shard")]
+    base: Option<PathBuf>,
     /// V-page layouts to write, comma-separated.
     #[arg(long, default_value = "horizontal,vertical,indexed-vertical", value_delimiter = ',')]
     layouts: Vec<LayoutKind>,
@@ -262,7 +266,11 @@ pub fn build(a: BuildArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     scene.grid = Some(ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)?);
-    let report = hdov::build(&scene, &a.out, &params, overwrite(a.force), &Progress::for_terminal(a.json))?;
+    let progress = Progress::for_terminal(a.json);
+    let report = match &a.visibility.base {
+        Some(base) => hdov::build_shard_on(&scene, base, &a.out, &params, overwrite(a.force), &progress)?,
+        None => hdov::build(&scene, &a.out, &params, overwrite(a.force), &progress)?,
+    };
     report_cleaned(&report);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).expect("serialisable"));

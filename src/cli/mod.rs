@@ -138,6 +138,7 @@ fn flag_of(param: Param) -> &'static str {
         Param::ReviewBox => "--review-box",
         Param::Scale => "--scale",
         Param::Scene => "SCENE",
+        Param::Base => "--base",
         Param::Shard => "--shard",
         Param::Shards => "SHARD_DB",
         Param::Size => "--size",

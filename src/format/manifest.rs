@@ -57,20 +57,40 @@ pub struct FileEntry {
     pub bytes: u64,
 }
 
-/// A view-invariant file a shard was measured against: its name, size and crc32.
+/// A view-invariant file a shard was measured against: its name, size and SHA-256. Not a crc32:
+/// every page of a page file ends with the crc32 of its payload, and a crc32 over such pages
+/// is the same whatever they hold (the CRC's residue), so two different trees of one shape
+/// would have matched.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FileChecksum {
     pub name: String,
     pub bytes: u64,
-    pub crc32: u32,
+    /// Lower-case hex.
+    pub sha256: String,
 }
 
 impl FileChecksum {
-    /// The size and crc32 of `dir/name`, as a shard names it and a merge compares it.
+    /// The size and SHA-256 of `dir/name`, as a shard names it and a merge compares it.
     pub fn of(dir: &Path, name: &str) -> Result<FileChecksum> {
+        use sha2::{Digest, Sha256};
+        use std::io::Read;
         let path = dir.join(name);
-        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-        Ok(FileChecksum { name: name.into(), bytes: bytes.len() as u64, crc32: crc32fast::hash(&bytes) })
+        let io = |e| Error::io(&path, e);
+        // Streamed: a huge scene's geometry is gigabytes.
+        let mut file = std::fs::File::open(&path).map_err(io)?;
+        let (mut hasher, mut bytes, mut buf) = (Sha256::new(), 0u64, vec![0u8; 1 << 20]);
+        loop {
+            let n = match file.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(io(e)),
+            };
+            hasher.update(&buf[..n]);
+            bytes += n as u64;
+        }
+        let sha256 = hasher.finalize().iter().map(|b| format!("{b:02x}")).collect();
+        Ok(FileChecksum { name: name.into(), bytes, sha256 })
     }
 }
 

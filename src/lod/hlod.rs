@@ -11,7 +11,10 @@
 //! faces it replaces at that error; [`trim`] then keeps the internal LODs from outweighing the
 //! leaf LODs they summarise.
 
-use super::{LodLevel, MIN_REDUCTION, simplify_to_error, weld};
+use std::borrow::Cow;
+
+use super::{ChainStore, LeafChains, LodLevel, MIN_REDUCTION, simplify_to_error, weld};
+use crate::error::Result;
 use crate::geom::max_scale;
 use crate::rtree::RTree;
 use crate::scene::{Mesh, Scene};
@@ -43,7 +46,7 @@ impl ErrorLadder {
 /// One part of a node: an object's leaf chain under its transform, or a child node's chain;
 /// finest first, errors in world units.
 enum Part<'a> {
-    Object { chain: &'a [LodLevel], transform: glam::Mat4, scale: f32 },
+    Object { chain: Cow<'a, [LodLevel]>, transform: glam::Mat4, scale: f32 },
     Node(&'a [LodLevel]),
 }
 
@@ -53,7 +56,7 @@ impl Part<'_> {
     fn level(&self, error: f32) -> Option<(usize, usize, f32)> {
         let (chain, scale, l) = match self {
             Part::Object { chain, scale, .. } => {
-                (*chain, *scale, chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0))
+                (&chain[..], *scale, chain.iter().rposition(|l| l.error * scale <= error).unwrap_or(0))
             }
             Part::Node(chain) => (*chain, 1.0, chain.iter().rposition(|l| l.error <= error)?),
         };
@@ -71,35 +74,32 @@ impl Part<'_> {
     }
 }
 
-/// Every node's chain, finest first. `leaf` are the base meshes' leaf chains. A node without a
-/// level that cuts faces
-/// (a single box, say) gets one: its children's coarsest parts merged, simplified as far as the
-/// coarsest rung allows.
+/// Every node's chain, finest first, each handed to `store` (see [`super::depth_first`]).
+/// `leaf` gives the base meshes' leaf chains. A node without a level that cuts faces (a single
+/// box, say) gets one: its children's coarsest parts merged, simplified as far as the coarsest
+/// rung allows.
 pub fn build(
     scene: &Scene,
     tree: &RTree,
-    leaf: &[Vec<LodLevel>],
+    leaf: &dyn LeafChains,
     ladder: &ErrorLadder,
     progress: &dyn crate::progress::Report,
-) -> Vec<Vec<LodLevel>> {
-    super::bottom_up(tree, progress, |id, internal| {
-                let node = &tree.nodes[id];
-                let parts: Vec<Part> = node
-                    .entries
-                    .iter()
-                    .map(|e| match node.is_leaf() {
-                        true => {
-                            let o = &scene.objects[e.child as usize];
-                            Part::Object {
-                                chain: &leaf[o.mesh as usize],
-                                transform: o.transform,
-                                scale: max_scale(&o.transform),
-                            }
-                        }
-                        false => Part::Node(&internal[e.child as usize]),
-                    })
-                    .collect();
-                node_chain(&parts, ladder)
+    store: &ChainStore,
+) -> Result<()> {
+    super::depth_first(tree, progress, store, &|id, children| {
+        let node = &tree.nodes[id];
+        let parts: Vec<Part> = match node.is_leaf() {
+            true => node
+                .entries
+                .iter()
+                .map(|e| {
+                    let o = &scene.objects[e.child as usize];
+                    Ok(Part::Object { chain: leaf.chain(o.mesh)?, transform: o.transform, scale: max_scale(&o.transform) })
+                })
+                .collect::<Result<_>>()?,
+            false => children.iter().map(|c| Part::Node(c)).collect(),
+        };
+        Ok(node_chain(&parts, ladder))
     })
 }
 
@@ -140,25 +140,43 @@ fn node_chain(parts: &[Part], ladder: &ErrorLadder) -> Vec<LodLevel> {
     coarse_first
 }
 
-/// Drops finest levels until all chains together hold at most `bytes` bytes of mesh data
-/// ([`mesh_bytes`]): those of the highest nodes first (the root's finest level is the one a query
-/// is least likely to stop at, since a node's DoV only grows towards the root), the biggest first
-/// among equals. Nodes keep their coarsest level while finer ones are left to drop; past that
-/// (many instances of tiny meshes, whose summaries outweigh the one stored copy) nodes lose their
-/// last level too, the highest first, and a query descends through them.
-pub fn trim(internal: &mut [Vec<LodLevel>], tree: &RTree, bytes: usize) {
-    let mut total: usize = internal.iter().flatten().map(mesh_bytes).sum();
+/// What [`trim`] weighs of a level: its bytes ([`mesh_bytes`]) and faces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LevelSize {
+    pub bytes: usize,
+    pub faces: usize,
+}
+
+impl LevelSize {
+    pub fn of(level: &LodLevel) -> LevelSize {
+        LevelSize { bytes: mesh_bytes(level), faces: level.faces() }
+    }
+}
+
+/// How many finest levels to drop from each chain (`sizes`, per node, finest first) so that all
+/// together hold at most `bytes` bytes of mesh data: those of the highest nodes first (the
+/// root's finest level is the one a query is least likely to stop at, since a node's DoV only
+/// grows towards the root), the biggest first among equals. Nodes keep their coarsest level
+/// while finer ones are left to drop; past that (many instances of tiny meshes, whose summaries
+/// outweigh the one stored copy) nodes lose their last level too, the highest first, and a
+/// query descends through them.
+pub fn trim(sizes: &[Vec<LevelSize>], tree: &RTree, bytes: usize) -> Vec<usize> {
+    let mut dropped = vec![0usize; sizes.len()];
+    let left = |i: usize, dropped: &[usize]| sizes[i].len() - dropped[i];
+    let mut total: usize = sizes.iter().flatten().map(|l| l.bytes).sum();
     for keep in [1, 0] {
         while total > bytes {
-            let Some(id) = (0..internal.len())
-                .filter(|&i| internal[i].len() > keep)
-                .max_by_key(|&i| (tree.nodes[i].level, internal[i][0].faces()))
+            let Some(id) = (0..sizes.len())
+                .filter(|&i| left(i, &dropped) > keep)
+                .max_by_key(|&i| (tree.nodes[i].level, sizes[i][dropped[i]].faces))
             else {
                 break;
             };
-            total -= mesh_bytes(&internal[id].remove(0));
+            total -= sizes[id][dropped[id]].bytes;
+            dropped[id] += 1;
         }
     }
+    dropped
 }
 
 /// The bytes a level's mesh record takes in `geometry.blob`: 12 per position, and each index as

@@ -13,11 +13,14 @@
 
 pub mod hlod;
 
+use std::borrow::Cow;
+
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use crate::format::params::{InternalLods, LodParams};
+use crate::error::Result;
 use crate::geom::max_scale;
 use crate::progress::Report;
 use crate::rtree::RTree;
@@ -50,7 +53,8 @@ pub struct SceneLods {
     pub internal: Vec<Vec<LodLevel>>,
 }
 
-/// Builds every leaf and internal LOD. `progress` advances by one per base mesh and per node.
+/// Builds every leaf and internal LOD in memory. `progress` advances by one per base mesh and
+/// per node. (A database build streams them to disk instead: `build::lods`.)
 pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progress: &dyn Report) -> SceneLods {
     let leaf: Vec<Vec<LodLevel>> = scene
         .meshes
@@ -61,79 +65,142 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
             chain
         })
         .collect();
-    let internal = match params.internal {
-        InternalLods::Hlod => {
-            let ladder = hlod::ErrorLadder::of(scene);
-            let mut internal = hlod::build(scene, tree, &leaf, &ladder, progress);
-            // The internal levels together weigh at most what the leaf chains weigh.
-            let leaf_bytes: usize = leaf.iter().flatten().map(hlod::mesh_bytes).sum();
-            hlod::trim(&mut internal, tree, leaf_bytes);
-            internal
-        }
-        InternalLods::Thesis => thesis_internal(scene, tree, &leaf, params, progress),
+    let built = std::sync::Mutex::new(vec![Vec::new(); tree.nodes.len()]);
+    let store = |id: usize, chain: Vec<LodLevel>| {
+        built.lock().expect("no panics while held")[id] = chain;
+        Ok(())
     };
+    internal_lods(scene, tree, params, &leaf, progress, &store).expect("in-memory chains cannot fail");
+    let mut internal = built.into_inner().expect("no panics while held");
+    if params.internal == InternalLods::Hlod {
+        // The internal levels together weigh at most what the leaf chains weigh.
+        let leaf_bytes: usize = leaf.iter().flatten().map(hlod::mesh_bytes).sum();
+        let drops = hlod::trim(&level_sizes(&internal), tree, leaf_bytes);
+        for (chain, drop) in internal.iter_mut().zip(drops) {
+            chain.drain(..drop);
+        }
+    }
     SceneLods { leaf, internal }
+}
+
+/// The bytes and faces of each level of each chain, as [`hlod::trim`] weighs them.
+pub fn level_sizes(chains: &[Vec<LodLevel>]) -> Vec<Vec<hlod::LevelSize>> {
+    chains.iter().map(|c| c.iter().map(hlod::LevelSize::of).collect()).collect()
+}
+
+/// Where a node's parts find the leaf chains of its objects' base meshes: in memory, or read
+/// back from what a build has written.
+pub trait LeafChains: Sync {
+    /// The chain of base mesh `mesh`, finest first.
+    fn chain(&self, mesh: u32) -> Result<Cow<'_, [LodLevel]>>;
+}
+
+impl LeafChains for Vec<Vec<LodLevel>> {
+    fn chain(&self, mesh: u32) -> Result<Cow<'_, [LodLevel]>> {
+        Ok(Cow::Borrowed(&self[mesh as usize]))
+    }
+}
+
+/// Builds one node's chain from its children's (see [`depth_first`]).
+pub(crate) type NodeChain<'a> = dyn Fn(usize, &[Vec<LodLevel>]) -> Result<Vec<LodLevel>> + Sync + 'a;
+
+/// A store for finished internal chains: `store(node id, chain)`, called once per node.
+pub type ChainStore<'a> = dyn Fn(usize, Vec<LodLevel>) -> Result<()> + Sync + 'a;
+
+/// Every node's internal chain by `params.internal`, each handed to `store` (untrimmed) as
+/// soon as its parent has been built from it, so only the chains along the open paths of a
+/// depth-first walk are held ([`depth_first`]).
+pub fn internal_lods(
+    scene: &Scene,
+    tree: &RTree,
+    params: &LodParams,
+    leaf: &dyn LeafChains,
+    progress: &dyn Report,
+    store: &ChainStore,
+) -> Result<()> {
+    match params.internal {
+        InternalLods::Hlod => hlod::build(scene, tree, leaf, &hlod::ErrorLadder::of(scene), progress, store),
+        InternalLods::Thesis => thesis_internal(scene, tree, leaf, params, progress, store),
+    }
 }
 
 /// The thesis's internal LODs (§5.6): each node from its children's coarsest levels.
 fn thesis_internal(
     scene: &Scene,
     tree: &RTree,
-    leaf: &[Vec<LodLevel>],
+    leaf: &dyn LeafChains,
     params: &LodParams,
     progress: &dyn Report,
-) -> Vec<Vec<LodLevel>> {
-    bottom_up(tree, progress, |id, internal| {
-                let node = &tree.nodes[id];
-                // Each part with its error against full detail, in world units.
-                let (parts, errors): (Vec<Mesh>, Vec<f32>) = node
-                    .entries
-                    .iter()
-                    .map(|e| {
-                        if node.is_leaf() {
-                            let o = &scene.objects[e.child as usize];
-                            let coarsest = leaf[o.mesh as usize].last().expect("chains are never empty");
-                            (coarsest.mesh.transformed(&o.transform), coarsest.error * max_scale(&o.transform))
-                        } else {
-                            let coarsest = coarsest_internal(internal, e.child as usize);
-                            (coarsest.mesh.clone(), coarsest.error)
-                        }
-                    })
-                    .unzip();
-                let mut chain = aggregate_chain(&parts, params);
-                // The simplifier measures against the parts, which are already simplified: a
-                // level's error against full detail is at most its own plus the parts' worst.
-                let inherited = errors.into_iter().fold(0.0, f32::max);
-                for level in &mut chain {
-                    level.error += inherited;
-                }
-                chain
+    store: &ChainStore,
+) -> Result<()> {
+    depth_first(tree, progress, store, &|id, children| {
+        let node = &tree.nodes[id];
+        // Each part with its error against full detail, in world units.
+        let mut parts = Vec::with_capacity(node.entries.len());
+        let mut errors = Vec::with_capacity(node.entries.len());
+        for (i, e) in node.entries.iter().enumerate() {
+            if node.is_leaf() {
+                let o = &scene.objects[e.child as usize];
+                let chain = leaf.chain(o.mesh)?;
+                let coarsest = chain.last().expect("chains are never empty");
+                parts.push(coarsest.mesh.transformed(&o.transform));
+                errors.push(coarsest.error * max_scale(&o.transform));
+            } else {
+                let coarsest = children[i].last().expect("children are simplified before their parent");
+                parts.push(coarsest.mesh.clone());
+                errors.push(coarsest.error);
+            }
+        }
+        let mut chain = aggregate_chain(&parts, params);
+        // The simplifier measures against the parts, which are already simplified: a
+        // level's error against full detail is at most its own plus the parts' worst.
+        let inherited = errors.into_iter().fold(0.0, f32::max);
+        for level in &mut chain {
+            level.error += inherited;
+        }
+        Ok(chain)
     })
 }
 
-/// Every node's chain, built a tree level at a time from the leaves up (nodes of one level in
-/// parallel): `chain(node, built)` sees the chains of every lower level in `built`.
-pub(crate) fn bottom_up(
+/// Every node's chain, built depth first from the root (a node's children in parallel, then
+/// the node from their chains): `chain(node, children's chains in entry order)`, with none for
+/// a leaf. Each chain goes to `store` once its parent is built, the root's last, so the chains
+/// held at once are those of the children of the nodes being built — a few per tree level and
+/// thread — whatever the tree's size.
+pub(crate) fn depth_first(
     tree: &RTree,
     progress: &dyn Report,
-    chain: impl Fn(usize, &[Vec<LodLevel>]) -> Vec<LodLevel> + Sync,
-) -> Vec<Vec<LodLevel>> {
-    let mut internal: Vec<Vec<LodLevel>> = vec![Vec::new(); tree.nodes.len()];
-    for level in 0..tree.height() {
-        let ids: Vec<usize> = (0..tree.nodes.len()).filter(|&i| tree.nodes[i].level == level).collect();
-        let chains: Vec<(usize, Vec<LodLevel>)> = ids
-            .par_iter()
-            .map(|&id| {
-                let c = chain(id, &internal);
-                progress.advance(1);
-                (id, c)
-            })
-            .collect();
-        for (id, c) in chains {
-            internal[id] = c;
+    store: &ChainStore,
+    chain: &NodeChain,
+) -> Result<()> {
+    fn visit(
+        id: usize,
+        tree: &RTree,
+        progress: &dyn Report,
+        store: &ChainStore,
+        chain: &NodeChain,
+    ) -> Result<Vec<LodLevel>> {
+        let node = &tree.nodes[id];
+        let children: Vec<Vec<LodLevel>> = match node.is_leaf() {
+            true => Vec::new(),
+            false => node
+                .entries
+                .par_iter()
+                .map(|e| visit(e.child as usize, tree, progress, store, chain))
+                .collect::<Result<_>>()?,
+        };
+        let own = chain(id, &children)?;
+        progress.advance(1);
+        for (e, c) in node.entries.iter().zip(children) {
+            store(e.child as usize, c)?;
         }
+        Ok(own)
     }
-    internal
+    if tree.nodes.is_empty() {
+        return Ok(());
+    }
+    let root = visit(0, tree, progress, store, chain)?;
+    store(0, root)
 }
 
 /// The one rule that picks a level of a LOD chain (thesis eq. 5.5 and 5.6): interpolate in
@@ -155,11 +222,6 @@ pub fn pick_level(levels: usize, faces: impl Fn(usize) -> u64, k: f64) -> usize 
 pub fn coarsest_below(errors: impl DoubleEndedIterator<Item = f32> + ExactSizeIterator, budget: f32) -> usize {
     let last = errors.len().saturating_sub(1);
     errors.rev().position(|e| e < budget).map_or(0, |from_end| last - from_end)
-}
-
-/// The coarsest internal LOD of a child node, built in an earlier (lower) level pass.
-fn coarsest_internal(internal: &[Vec<LodLevel>], child: usize) -> &LodLevel {
-    internal[child].last().expect("children are simplified before their parent")
 }
 
 /// The leaf chain of one mesh: full detail, then each level ≈ `ratio` of the one before.

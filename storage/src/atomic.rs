@@ -26,6 +26,16 @@ pub fn write_file_synced(path: &Path, bytes: &[u8]) -> Result<()> {
     f.sync_all().map_err(|e| Error::io(path, e))
 }
 
+/// Copies `from` to the new file `to` without holding it in memory, and makes the copy durable;
+/// returns its length.
+pub fn copy_file_synced(from: &Path, to: &Path) -> Result<u64> {
+    let mut src = File::open(from).map_err(|e| Error::io(from, e))?;
+    let mut dst = File::create(to).map_err(|e| Error::io(to, e))?;
+    let n = std::io::copy(&mut src, &mut dst).map_err(|e| Error::io(to, e))?;
+    dst.sync_all().map_err(|e| Error::io(to, e))?;
+    Ok(n)
+}
+
 /// What [`DirTxn::begin`] may do with an existing target.
 #[derive(Clone, Copy, Debug)]
 pub enum Overwrite {

@@ -68,6 +68,15 @@ impl BlobWriter {
         Ok(r)
     }
 
+    /// A reader of the records appended so far (the buffer is flushed; later appends are not
+    /// its to read): so that a writer can stream records out and read some of them back while
+    /// it goes on, holding none of them in memory.
+    pub fn reader(&mut self) -> Result<AppendedRecords> {
+        self.file.flush().map_err(|e| Error::io(&self.path, e))?;
+        let file = File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
+        Ok(AppendedRecords { path: self.path.clone(), file, end: self.end })
+    }
+
     /// Writes the header and fsyncs. Returns the file's length in bytes.
     pub fn finish(self) -> Result<u64> {
         let path = self.path;
@@ -86,6 +95,38 @@ impl BlobWriter {
             .and_then(|()| file.sync_all())
             .map_err(|e| Error::io(&path, e))?;
         Ok(self.end)
+    }
+}
+
+/// Records a [`BlobWriter`] has appended, read back by reference ([`BlobWriter::reader`]);
+/// shareable between threads (positioned reads).
+pub struct AppendedRecords {
+    path: PathBuf,
+    file: File,
+    end: u64,
+}
+
+impl AppendedRecords {
+    /// The bytes of the record at `r`, with bounds, length and crc32 checked.
+    pub fn read(&self, r: BlobRef) -> Result<Vec<u8>> {
+        let bad = |reason: String| Error::corrupt(&self.path, reason);
+        let data_end = r.offset.checked_add(RECORD_HEADER_LEN as u64 + u64::from(r.len));
+        if r.offset < BLOB_HEADER_LEN as u64 || data_end.is_none_or(|e| e > self.end) {
+            return Err(bad(format!("record at byte {} lies outside the {} bytes written", r.offset, self.end)));
+        }
+        let mut head = [0u8; RECORD_HEADER_LEN];
+        self.file.read_exact_at(&mut head, r.offset).map_err(|e| Error::io(&self.path, e))?;
+        if u32_at(&head, 0) != Some(r.len) {
+            return Err(bad(format!("record at byte {} is not {} bytes long", r.offset, r.len)));
+        }
+        let mut data = vec![0u8; r.len as usize];
+        self.file
+            .read_exact_at(&mut data, r.offset + RECORD_HEADER_LEN as u64)
+            .map_err(|e| Error::io(&self.path, e))?;
+        if Some(crc32fast::hash(&data)) != u32_at(&head, 4) {
+            return Err(Error::RecordChecksum { path: path_str(&self.path), offset: r.offset });
+        }
+        Ok(data)
     }
 }
 

@@ -29,12 +29,15 @@ pub mod pagefile;
 pub mod synthetic;
 pub mod vpage;
 
-pub use atomic::{DirTxn, Overwrite, write_file_synced};
-pub use blob::{BlobFile, BlobRef, BlobWriter};
+pub use atomic::{DirTxn, Overwrite, copy_file_synced, write_file_synced};
+pub use blob::{AppendedRecords, BlobFile, BlobRef, BlobWriter};
 pub use cache::{CacheLimits, CachePolicy, CacheStats, PageCache, PageKey, PolicyKind};
 pub use error::{Error, Result};
 pub use io_stats::{FileIo, IoStats};
-pub use layout::{FlipCost, Layout, LayoutCursor, LayoutKind, LayoutOptions, LayoutSize, LayoutSummary, write_layout};
+pub use layout::{
+    FlipCost, Layout, LayoutCursor, LayoutKind, LayoutOptions, LayoutSize, LayoutSummary, LayoutWriter, VShape,
+    write_layout,
+};
 pub use page_reader::PageReader;
 pub use pagefile::{FORMAT_VERSION, PageFile, PageFileWriter, ReadMode};
 pub use vpage::{DovCodec, VData, VDataStats, VEntry, VPageCodec};

@@ -123,6 +123,46 @@ impl PageFileWriter {
         Ok(page_no)
     }
 
+    /// Replaces page `page` (< [`page_count`](Self::page_count)) with `payload`: for records
+    /// whose contents are known only once the pages after them are written (a layout's
+    /// metadata), and for pages filled out of order into a run made by
+    /// [`extend_to`](Self::extend_to).
+    pub fn rewrite(&mut self, page: u64, payload: &[u8]) -> Result<()> {
+        let cap = self.capacity();
+        if page >= self.page_count || payload.len() > cap {
+            return Err(Error::invalid(
+                &self.path,
+                format!(
+                    "rewrite of page {page} ({} bytes) outside the {} pages written",
+                    payload.len(),
+                    self.page_count
+                ),
+            ));
+        }
+        self.file.flush().map_err(|e| Error::io(&self.path, e))?;
+        self.buf[..payload.len()].copy_from_slice(payload);
+        self.buf[payload.len()..cap].fill(0);
+        let crc = crc32fast::hash(&self.buf[..cap]);
+        self.buf[cap..].copy_from_slice(&crc.to_le_bytes());
+        let at = (page + 1) * u64::from(self.page_size);
+        self.file.get_ref().write_all_at(&self.buf, at).map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// Grows the file to `pages` data pages without writing them: each must then be written by
+    /// [`rewrite`](Self::rewrite). A page left out keeps zero bytes, whose checksum fails on
+    /// read, so a gap is found, never taken for data.
+    pub fn extend_to(&mut self, pages: u64) -> Result<()> {
+        if pages <= self.page_count {
+            return Ok(());
+        }
+        self.file.flush().map_err(|e| Error::io(&self.path, e))?;
+        let len = (pages + 1) * u64::from(self.page_size);
+        let file = self.file.get_mut();
+        file.set_len(len).and_then(|()| file.seek(SeekFrom::Start(len))).map_err(|e| Error::io(&self.path, e))?;
+        self.page_count = pages;
+        Ok(())
+    }
+
     /// Writes the header and fsyncs the file. Returns the file's length in bytes.
     pub fn finish(self) -> Result<u64> {
         let path = self.path;

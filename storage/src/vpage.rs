@@ -59,22 +59,7 @@ impl VData {
             return Err(format!("{n} nodes: more than 2^32"));
         }
         for (c, cell) in self.cells.iter().enumerate() {
-            let mut prev: Option<u32> = None;
-            for (node, entries) in cell {
-                if prev.is_some_and(|p| p >= *node) {
-                    return Err(format!("cell {c}: nodes not strictly increasing at node {node}"));
-                }
-                prev = Some(*node);
-                let Some(&fanout) = self.node_fanout.get(*node as usize) else {
-                    return Err(format!("cell {c}: node {node} out of range ({n} nodes)"));
-                };
-                if entries.len() != usize::from(fanout) {
-                    return Err(format!("cell {c}, node {node}: {} V-entries for {fanout} entries", entries.len()));
-                }
-                if let Some(e) = entries.iter().find(|e| !(e.dov >= 0.0 && e.dov.is_finite())) {
-                    return Err(format!("cell {c}, node {node}: DoV {} not finite and ≥ 0", e.dov));
-                }
-            }
+            validate_cell(c, cell, &self.node_fanout)?;
         }
         Ok(())
     }
@@ -96,6 +81,29 @@ impl VData {
         s.visible_mean = if self.cell_count == 0 { 0.0 } else { s.visible_total as f64 / f64::from(self.cell_count) };
         s
     }
+}
+
+/// Checks one cell's V-pages (number `c`, for the message): node numbers strictly increasing
+/// and in range of `node_fanout`, one V-entry per node entry, DoVs finite and ≥ 0.
+pub fn validate_cell(c: usize, cell: &[(u32, Vec<VEntry>)], node_fanout: &[u16]) -> Result<(), String> {
+    let n = node_fanout.len();
+    let mut prev: Option<u32> = None;
+    for (node, entries) in cell {
+        if prev.is_some_and(|p| p >= *node) {
+            return Err(format!("cell {c}: nodes not strictly increasing at node {node}"));
+        }
+        prev = Some(*node);
+        let Some(&fanout) = node_fanout.get(*node as usize) else {
+            return Err(format!("cell {c}: node {node} out of range ({n} nodes)"));
+        };
+        if entries.len() != usize::from(fanout) {
+            return Err(format!("cell {c}, node {node}: {} V-entries for {fanout} entries", entries.len()));
+        }
+        if let Some(e) = entries.iter().find(|e| !(e.dov >= 0.0 && e.dov.is_finite())) {
+            return Err(format!("cell {c}, node {node}: DoV {} not finite and ≥ 0", e.dov));
+        }
+    }
+    Ok(())
 }
 
 /// A V-page whose entries are all (0, 0) is invisible: the layouts store it as absent.

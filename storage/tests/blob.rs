@@ -113,3 +113,27 @@ fn header_damage() {
     let e = BlobFile::open(&path, KIND).unwrap_err();
     assert!(e.to_string().contains("header checksum"), "{e}");
 }
+
+#[test]
+fn records_read_back_while_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("b");
+    let mut w = BlobWriter::create(&path, KIND).unwrap();
+    let refs: Vec<BlobRef> = sample().iter().map(|r| w.append(r).unwrap()).collect();
+    let reader = w.reader().unwrap();
+    let later = w.append(b"after the reader").unwrap();
+    for (r, want) in refs.iter().zip(sample()) {
+        assert_eq!(reader.read(*r).unwrap(), want);
+    }
+    // What came after the reader, and references that do not point at a record, are errors.
+    for r in [later, BlobRef { offset: 0, len: 5 }, BlobRef { offset: u64::MAX, len: 5 }, BlobRef { len: 4, ..refs[0] }]
+    {
+        assert!(reader.read(r).is_err(), "{r:?}");
+    }
+    w.finish().unwrap();
+    // A flipped byte under a reader fails the record's checksum.
+    let mut bytes = fs::read(&path).unwrap();
+    bytes[refs[2].offset as usize + 8 + 10] ^= 1;
+    fs::write(&path, &bytes).unwrap();
+    assert!(matches!(reader.read(refs[2]), Err(Error::RecordChecksum { .. })));
+}

@@ -83,6 +83,11 @@ impl CpuBackend {
     /// As [`CpuBackend::new`] with an explicit near distance (surfaces nearer than `near` along a
     /// face's forward axis are ignored, exactly as the GPU backend's near plane clips them).
     pub fn with_near(scene: &Scene, resolution: u32, near: f32) -> Result<Self> {
+        Self::build(scene, resolution, near, WORLD_BLAS_MAX_TRIANGLES)
+    }
+
+    /// [`CpuBackend::with_near`] with world BLASes of at most `world_blas_max` triangles.
+    fn build(scene: &Scene, resolution: u32, near: f32, world_blas_max: u64) -> Result<Self> {
         check_resolution_and_near(resolution, near)?;
         check_object_count(scene)?;
         // Which objects are instanced: an invertible affine transform of a mesh two or more such
@@ -98,9 +103,9 @@ impl CpuBackend {
         let world: Vec<usize> = (0..scene.objects.len()).filter(|&i| !instanced(i)).collect();
         let mut sources = Vec::new();
         let mut mesh_blas = vec![u32::MAX; scene.meshes.len()];
-        if !world.is_empty() {
-            sources.push(BlasSource::World(world));
-        }
+        let world_chunks = world_chunks(scene, world, world_blas_max);
+        let world_count = world_chunks.len();
+        sources.extend(world_chunks.into_iter().map(BlasSource::World));
         for (m, &n) in uses.iter().enumerate() {
             if n >= 2 {
                 mesh_blas[m] = sources.len() as u32;
@@ -121,11 +126,9 @@ impl CpuBackend {
                 kept.push(b);
             }
         }
-        if let Some(BlasSource::World(_)) = sources.first()
-            && blas_index[0] != u32::MAX
-        {
-            instances.push(Instance { blas: blas_index[0], object: NO_OBJECT, to_model: None });
-            boxes.push(kept[blas_index[0] as usize].bvh.total_aabb);
+        for &b in blas_index[..world_count].iter().filter(|&&b| b != u32::MAX) {
+            instances.push(Instance { blas: b, object: NO_OBJECT, to_model: None });
+            boxes.push(kept[b as usize].bvh.total_aabb);
         }
         let mesh_boxes: Vec<crate::geom::Aabb> = scene.meshes.iter().map(|m| m.mesh.bounds()).collect();
         for (i, o) in scene.objects.iter().enumerate() {
@@ -245,6 +248,40 @@ impl RayCaster for CpuBackend {
     }
 }
 
+/// The most world-space triangles one BLAS takes. A bigger world goes into several BLASes of
+/// spatially compact groups of objects: a BVH build needs about twice the memory its BVH keeps,
+/// and the huge city's 114 M triangles in one build did not fit in 24 GB. Every scene up to the
+/// large city (11 M) keeps its one world BLAS.
+const WORLD_BLAS_MAX_TRIANGLES: u64 = 12 << 20;
+
+/// `world` (object indices) cut into groups of at most `max` triangles
+/// (an object is never split), in Morton order of their boxes' centres so each group is compact;
+/// one group, in index order, when the whole fits.
+fn world_chunks(scene: &Scene, mut world: Vec<usize>, max: u64) -> Vec<Vec<usize>> {
+    let tris = |i: usize| scene.meshes[scene.objects[i].mesh as usize].mesh.triangle_count() as u64;
+    if world.iter().map(|&i| tris(i)).sum::<u64>() <= max {
+        return if world.is_empty() { Vec::new() } else { vec![world] };
+    }
+    let boxes = scene.all_object_bounds();
+    let bounds = boxes.iter().fold(crate::geom::Aabb::EMPTY, |a, &b| a.union(b));
+    let key = |i: usize| {
+        let c = (boxes[i].center() - bounds.min) / bounds.extent().max(Vec3::splat(f32::MIN_POSITIVE));
+        crate::geom::morton3(c)
+    };
+    world.sort_by_cached_key(|&i| (key(i), i));
+    let mut chunks: Vec<Vec<usize>> = Vec::new();
+    let mut filled = u64::MAX;
+    for i in world {
+        if filled.saturating_add(tris(i)) > max {
+            chunks.push(Vec::new());
+            filled = 0;
+        }
+        filled += tris(i);
+        chunks.last_mut().expect("pushed above").push(i);
+    }
+    chunks
+}
+
 /// Whether this CPU runs [`CpuBackend::trace_band_wide`] (x86-64 with AVX2, FMA, BMI1/2, LZCNT and
 /// POPCNT: every x86-64 since 2013).
 fn wide_instructions() -> bool {
@@ -313,6 +350,42 @@ mod tests {
             s.add_box(&format!("box {k}"), p, p + size);
         }
         s
+    }
+
+    /// A world cut into many BLASes sees exactly what one BLAS sees.
+    #[test]
+    fn world_blases_in_groups_see_what_one_sees() {
+        // Each box its own mesh, so that all go into world-space BLASes.
+        let instanced = boxes();
+        let mut scene = Scene::default();
+        for (i, o) in instanced.objects.iter().enumerate() {
+            let m = scene.add_mesh(&format!("m{i}"), instanced.object_mesh(i).transformed(&o.transform));
+            scene.add_object(&o.name, m, glam::Mat4::IDENTITY);
+        }
+        let mut one = CpuBackend::new(&scene, 24).unwrap();
+        assert_eq!(one.blases.len(), 1);
+        let near = super::super::default_near(&scene.bounds());
+        let mut groups = CpuBackend::build(&scene, 24, near, 40).unwrap();
+        assert!(groups.blases.len() >= 9, "{} BLASes for 30 boxes of 12 triangles", groups.blases.len());
+        let (mut a, mut b) = (IdCube::new(24), IdCube::new(24));
+        for p in [Vec3::ZERO, Vec3::new(3.0, 1.0, -2.0), Vec3::new(-5.0, -2.0, 4.0)] {
+            one.render_ids(p, &mut a).unwrap();
+            groups.render_ids(p, &mut b).unwrap();
+            assert!(a == b, "ids differ at {p}");
+        }
+    }
+
+    #[test]
+    fn morton_codes_order_space() {
+        use crate::geom::morton3;
+        assert_eq!(morton3(Vec3::ZERO), 0);
+        assert_eq!(morton3(Vec3::ONE), (1 << 30) - 1);
+        assert_eq!(morton3(Vec3::new(f32::NAN, 2.0, -1.0)), morton3(Vec3::new(0.0, 1.0, 0.0)));
+        // The first bit interleaved is x's, then y's, then z's.
+        let step = 1.0 / 1023.0;
+        assert_eq!(morton3(Vec3::new(step, 0.0, 0.0)), 1);
+        assert_eq!(morton3(Vec3::new(0.0, step, 0.0)), 2);
+        assert_eq!(morton3(Vec3::new(0.0, 0.0, step)), 4);
     }
 
     proptest! {

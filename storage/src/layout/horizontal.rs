@@ -8,69 +8,105 @@
 //! capacity⌉` when a V-page exceeds a page). `first(n)` follows from the fan-outs (the thesis
 //! keeps it as a pointer in the node); hidden nodes' slots are zero.
 
-use super::packing::{Addr, Packer, PagedFile, SlotArray};
-use super::{LayoutKind, LayoutSize, Meta, WriteCtx, layout_size};
+use super::packing::{Addr, PagedFile, SlotArray, rewrite_front};
+use super::writer::{Tally, WriteCtx};
+use super::{LayoutKind, LayoutSize, Meta, layout_size};
 use crate::error::Result;
 use crate::pagefile::PageFileWriter;
-use crate::vpage::is_zero_page;
+use crate::vpage::{VEntry, is_zero_page};
 
 pub(crate) const VPAGES_FILE: &str = "vpages.horizontal";
 pub(crate) const TAG: [u8; 4] = *b"HZVP";
 
-pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
-    let data = w.data;
-    let cells = data.cell_count as usize;
-    let cap = w.cap() as u64;
-    let path = w.dir.join(VPAGES_FILE);
-    let meta_len = Meta::encoded_len(LayoutKind::Horizontal, u64::from(data.cell_count), data.node_fanout.len() as u64);
-    let data_start = super::record_pages(meta_len, cap);
-    let node_pages: u64 = data
-        .node_fanout
-        .iter()
-        .map(|&f| slots(w.codec.vpage_bytes(f) as u64, cap).pages(cells as u64).unwrap_or(0))
-        .sum();
-    let meta = Meta {
-        kind: LayoutKind::Horizontal,
-        codec: w.codec,
-        sparse: w.sparse,
-        cell_count: data.cell_count,
-        node_count: data.node_fanout.len() as u32,
-        data_start,
-        vpages_pages: data_start + node_pages,
-        visible_total: w.stats.visible_total,
-        flip_pages_total: 0,
-        visible_max: w.stats.visible_max,
-        flip_pages_max: 0,
-        fanout: data.node_fanout.clone(),
-        directory: Vec::new(),
-    };
-    let mut p = Packer::new(&path, PageFileWriter::create(&path, TAG, w.page_size)?);
-    p.put(&meta.encode())?;
-    // Each cell's list is sorted by node: one cursor per cell walks it as nodes advance.
-    let mut cursor = vec![0usize; cells];
-    let mut buf = Vec::new();
-    for (node, &fanout) in data.node_fanout.iter().enumerate() {
-        p.align()?;
-        let size = w.codec.vpage_bytes(fanout);
-        for (c, cell) in data.cells.iter().enumerate() {
-            buf.clear();
-            match cell.get(cursor[c]) {
-                Some((n, entries)) if *n as usize == node => {
-                    cursor[c] += 1;
-                    if !is_zero_page(entries) {
-                        w.codec.encode(entries, &mut buf);
-                    }
-                }
-                _ => {}
-            }
-            buf.resize(size, 0);
-            p.put(&buf)?;
+/// Writes `vpages.horizontal` cell by cell. Each node's run of pages has a place fixed by the
+/// fan-outs, so the file is sized first and each page is written where it belongs as soon as
+/// its slots are filled: the writer holds one page per node.
+pub(crate) struct Writer {
+    w: WriteCtx,
+    file: PageFileWriter,
+    data_start: u64,
+    /// First page of each node's run.
+    first: Vec<u64>,
+    /// Per node, the payload of the page being filled.
+    open: Vec<Vec<u8>>,
+    cell: u64,
+    tally: Tally,
+    slot: Vec<u8>,
+}
+
+impl Writer {
+    pub fn create(w: WriteCtx) -> Result<Self> {
+        let cap = w.cap() as u64;
+        let path = w.dir.join(VPAGES_FILE);
+        let meta_len = Meta::encoded_len(LayoutKind::Horizontal, u64::from(w.cell_count), w.fanout.len() as u64);
+        let data_start = super::record_pages(meta_len, cap);
+        let mut first = Vec::with_capacity(w.fanout.len());
+        let mut page = data_start;
+        for &f in &w.fanout {
+            first.push(page);
+            page += slots(w.codec.vpage_bytes(f) as u64, cap).pages(u64::from(w.cell_count)).unwrap_or(0);
         }
+        let mut file = PageFileWriter::create(&path, TAG, w.page_size)?;
+        file.extend_to(page)?;
+        let open = vec![Vec::new(); w.fanout.len()];
+        Ok(Self { w, file, data_start, first, open, cell: 0, tally: Tally::default(), slot: Vec::new() })
     }
-    let (pages, bytes) = p.finish()?;
-    debug_assert_eq!(pages, meta.vpages_pages);
-    let vpage_bytes = (pages - data_start) * u64::from(w.page_size);
-    Ok(layout_size(vec![(VPAGES_FILE.to_string(), bytes)], vpage_bytes))
+
+    /// Every node's slot for the next cell: its V-page, or zeros where it is hidden.
+    pub fn push(&mut self, cell: &[(u32, Vec<VEntry>)]) -> Result<()> {
+        let cap = self.w.cap();
+        let c = self.cell;
+        let mut pages = cell.iter().peekable();
+        for (node, &fanout) in self.w.fanout.iter().enumerate() {
+            let size = self.w.codec.vpage_bytes(fanout);
+            self.slot.clear();
+            if let Some((_, entries)) = pages.next_if(|(n, _)| *n as usize == node)
+                && !is_zero_page(entries)
+            {
+                self.w.codec.encode(entries, &mut self.slot);
+            }
+            self.slot.resize(size, 0);
+            if size == 0 {
+                continue;
+            }
+            let first = self.first[node];
+            if size <= cap {
+                let per_page = (cap / size) as u64;
+                let open = &mut self.open[node];
+                open.extend_from_slice(&self.slot);
+                if open.len() == per_page as usize * size {
+                    self.file.rewrite(first + c / per_page, open)?;
+                    open.clear();
+                }
+            } else {
+                let span = size.div_ceil(cap) as u64;
+                for (i, chunk) in self.slot.chunks(cap).enumerate() {
+                    self.file.rewrite(first + c * span + i as u64, chunk)?;
+                }
+            }
+        }
+        self.tally.add(cell);
+        self.cell += 1;
+        Ok(())
+    }
+
+    pub fn finish(mut self) -> Result<LayoutSize> {
+        let cap = self.w.cap();
+        // The last page of each run, partly filled.
+        for (node, open) in self.open.iter().enumerate() {
+            if !open.is_empty() {
+                let per_page = (cap / self.w.codec.vpage_bytes(self.w.fanout[node])) as u64;
+                self.file.rewrite(self.first[node] + (self.cell - 1) / per_page, open)?;
+            }
+        }
+        let pages = self.file.page_count();
+        let meta = self.w.meta(LayoutKind::Horizontal, self.data_start, pages, self.tally, (0, 0), Vec::new());
+        rewrite_front(&mut self.file, &meta.encode())?;
+        let pages = self.file.page_count();
+        let page_size = u64::from(self.w.page_size);
+        let bytes = self.file.finish()?;
+        Ok(layout_size(vec![(VPAGES_FILE.to_string(), bytes)], (pages - self.data_start) * page_size))
+    }
 }
 
 fn slots(size: u64, cap: u64) -> SlotArray {

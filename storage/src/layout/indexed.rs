@@ -8,12 +8,14 @@
 //! as `vpages.vertical`.
 
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, record_pages};
-use super::vertical::{CellVPages, write_cell_vpages};
-use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY, WriteCtx, layout_size};
+use super::vertical::CellVPageWriter;
+use super::writer::{Tally, WriteCtx};
+use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY};
 use crate::error::Result;
 use crate::le::u32_at;
 use crate::page_reader::PageReader;
 use crate::pagefile::PageFileWriter;
+use crate::vpage::VEntry;
 
 pub(crate) const INDEX_FILE: &str = "vindex.indexed-vertical";
 pub(crate) const VPAGES_FILE: &str = "vpages.indexed-vertical";
@@ -23,62 +25,68 @@ pub(crate) const VPAGES_TAG: [u8; 4] = *b"IVVP";
 /// Bytes of one segment entry: node number, V-page address.
 const PAIR_BYTES: usize = 4 + ADDR_BYTES;
 
-pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
-    let data = w.data;
-    let nodes = data.node_fanout.len();
-    let cap = w.cap();
-    let CellVPages { addrs, pages: vp_pages, bytes: vp_bytes } =
-        write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
+/// Writes the indexed-vertical layout cell by cell: each cell's V-pages, then its segment,
+/// whose address goes into the directory that the metadata gets at the end.
+pub(crate) struct Writer {
+    w: WriteCtx,
+    vpages: CellVPageWriter,
+    index: Packer,
+    data_start: u64,
+    directory: Vec<(Addr, u32)>,
+    flip_total: u64,
+    flip_max: u64,
+    tally: Tally,
+    addrs: Vec<(u32, Addr)>,
+    bytes: Vec<u8>,
+}
 
-    let meta_len = Meta::encoded_len(LayoutKind::IndexedVertical, u64::from(data.cell_count), nodes as u64);
-    let data_start = record_pages(meta_len, cap as u64);
-    // Place the segments first (no writing) so the directory can go in the metadata.
-    let mut dry = Packer::dry_run(&w.dir.join(INDEX_FILE), cap, data_start);
-    let mut directory = Vec::with_capacity(addrs.len());
-    let mut flip_total = 0u64;
-    let mut flip_max = 0u64;
-    let mut zeros = Vec::new();
-    for cell in &addrs {
-        zeros.resize(cell.len() * PAIR_BYTES, 0);
-        directory.push((dry.put(&zeros)?, cell.len() as u32));
-        let flip = record_pages(zeros.len() as u64, cap as u64);
-        flip_total += flip;
-        flip_max = flip_max.max(flip);
+impl Writer {
+    pub fn create(w: WriteCtx) -> Result<Self> {
+        let vpages = CellVPageWriter::create(&w, VPAGES_FILE, VPAGES_TAG)?;
+        let meta_len = Meta::encoded_len(LayoutKind::IndexedVertical, u64::from(w.cell_count), w.fanout.len() as u64);
+        let data_start = record_pages(meta_len, w.cap() as u64);
+        let index_path = w.dir.join(INDEX_FILE);
+        let mut index = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
+        // The metadata holds the directory, known at the end: a placeholder of its length.
+        index.put(&vec![0; meta_len as usize])?;
+        index.align()?;
+        let directory = Vec::with_capacity(w.cell_count as usize);
+        Ok(Self {
+            w,
+            vpages,
+            index,
+            data_start,
+            directory,
+            flip_total: 0,
+            flip_max: 0,
+            tally: Tally::default(),
+            addrs: Vec::new(),
+            bytes: Vec::new(),
+        })
     }
-    let meta = Meta {
-        kind: LayoutKind::IndexedVertical,
-        codec: w.codec,
-        sparse: w.sparse,
-        cell_count: data.cell_count,
-        node_count: nodes as u32,
-        data_start,
-        vpages_pages: vp_pages,
-        visible_total: w.stats.visible_total,
-        flip_pages_total: flip_total,
-        visible_max: w.stats.visible_max,
-        flip_pages_max: flip_max as u32,
-        fanout: data.node_fanout.clone(),
-        directory,
-    };
-    let index_path = w.dir.join(INDEX_FILE);
-    let mut p = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
-    p.put(&meta.encode())?;
-    p.align()?;
-    let mut bytes = Vec::new();
-    for (cell, (want, _)) in addrs.iter().zip(&meta.directory) {
-        bytes.clear();
-        for &(node, addr) in cell {
-            bytes.extend_from_slice(&node.to_le_bytes());
-            addr.encode(&mut bytes);
+
+    pub fn push(&mut self, cell: &[(u32, Vec<VEntry>)]) -> Result<()> {
+        self.vpages.put_cell(&self.w, cell, &mut self.addrs)?;
+        self.bytes.clear();
+        for &(node, addr) in &self.addrs {
+            self.bytes.extend_from_slice(&node.to_le_bytes());
+            addr.encode(&mut self.bytes);
         }
-        let got = p.put(&bytes)?;
-        debug_assert_eq!(got, *want);
+        self.directory.push((self.index.put(&self.bytes)?, self.addrs.len() as u32));
+        let flip = record_pages(self.bytes.len() as u64, self.w.cap() as u64);
+        self.flip_total += flip;
+        self.flip_max = self.flip_max.max(flip);
+        self.tally.add(cell);
+        Ok(())
     }
-    let (_, ix_bytes) = p.finish()?;
-    Ok(layout_size(
-        vec![(INDEX_FILE.to_string(), ix_bytes), (VPAGES_FILE.to_string(), vp_bytes)],
-        vp_pages * u64::from(w.page_size),
-    ))
+
+    pub fn finish(self) -> Result<LayoutSize> {
+        let w = &self.w;
+        let (flips, tally, start, dir) =
+            ((self.flip_total, self.flip_max), self.tally, self.data_start, self.directory);
+        let meta = |vp_pages| w.meta(LayoutKind::IndexedVertical, start, vp_pages, tally, flips, dir);
+        w.finish_vertical(self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
+    }
 }
 
 /// Checks what the cursors rely on: one directory entry per cell.

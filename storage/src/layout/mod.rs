@@ -16,6 +16,7 @@ mod horizontal;
 mod indexed;
 mod packing;
 mod vertical;
+mod writer;
 
 use std::fmt;
 use std::path::Path;
@@ -24,9 +25,10 @@ use std::str::FromStr;
 use crate::error::{Error, Result};
 use crate::le::{u32_at, u64_at};
 use crate::page_reader::PageReader;
-use crate::pagefile::{MIN_PAGE_SIZE, PageFile, ReadMode};
-use crate::vpage::{DovCodec, SparseCodec, VData, VDataStats, VEntry, VPageCodec};
+use crate::pagefile::{PageFile, ReadMode};
+use crate::vpage::{DovCodec, SparseCodec, VData, VEntry, VPageCodec};
 use packing::{Addr, PagedFile, record_pages};
+pub use writer::{LayoutWriter, VShape};
 
 /// Which layout. Ordered as [`LayoutKind::ALL`] lists them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -148,52 +150,17 @@ pub struct LayoutSummary {
     pub bytes: u64,
 }
 
-/// Writes the `kind` layout of `data` into the existing directory `dir`.
+/// Writes the `kind` layout of `data` into the existing directory `dir` (through a
+/// [`LayoutWriter`], cell by cell).
 ///
 /// V-pages whose entries are all (0, 0) are treated as invisible and not stored.
 pub fn write_layout(dir: &Path, kind: LayoutKind, data: &VData, opts: &LayoutOptions) -> Result<LayoutSize> {
     data.validate().map_err(|r| Error::invalid(dir, r))?;
-    if !(MIN_PAGE_SIZE..=MAX_LAYOUT_PAGE_SIZE).contains(&opts.page_size) {
-        return Err(Error::invalid(
-            dir,
-            format!("page size {} outside {MIN_PAGE_SIZE}..={MAX_LAYOUT_PAGE_SIZE}", opts.page_size),
-        ));
+    let mut w = LayoutWriter::create(dir, kind, &VShape::of(data), opts)?;
+    for cell in &data.cells {
+        w.push_cell(cell)?;
     }
-    let stats = data.stats();
-    let codec = VPageCodec::new(opts.dov, stats.nvo_max);
-    let sparse = (opts.sparse && kind != LayoutKind::Horizontal)
-        .then(|| SparseCodec::for_max_fanout(data.node_fanout.iter().copied().max().unwrap_or(0)));
-    let w = WriteCtx { dir, data, stats, codec, sparse, page_size: opts.page_size };
-    match kind {
-        LayoutKind::Horizontal => horizontal::write(&w),
-        LayoutKind::Vertical => vertical::write(&w),
-        LayoutKind::IndexedVertical => indexed::write(&w),
-    }
-}
-
-/// What every layout writer needs.
-pub(crate) struct WriteCtx<'a> {
-    pub dir: &'a Path,
-    pub data: &'a VData,
-    pub stats: VDataStats,
-    pub codec: VPageCodec,
-    /// The sparse-capable V-page encoding, if used (never for horizontal).
-    pub sparse: Option<SparseCodec>,
-    pub page_size: u32,
-}
-
-impl WriteCtx<'_> {
-    pub fn cap(&self) -> usize {
-        self.page_size as usize - crate::pagefile::PAGE_CRC_LEN
-    }
-
-    /// Appends the record of one stored V-page (dense, or the shorter form when sparse).
-    pub fn encode_vpage(&self, entries: &[VEntry], out: &mut Vec<u8>) {
-        match &self.sparse {
-            Some(sp) => sp.encode(&self.codec, entries, out),
-            None => self.codec.encode(entries, out),
-        }
-    }
+    w.finish()
 }
 
 /// Bytes of the metadata record's fixed part.

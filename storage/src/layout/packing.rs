@@ -75,11 +75,11 @@ impl SlotArray {
     }
 }
 
-/// Packs records into a page file (or, with no file, only computes where they would go).
+/// Packs records into a page file.
 pub(crate) struct Packer {
-    /// The file written (or planned, for a dry run), for error messages.
+    /// The file written, for error messages.
     path: PathBuf,
-    writer: Option<PageFileWriter>,
+    writer: PageFileWriter,
     cap: usize,
     /// Payload of the page being filled.
     cur: Vec<u8>,
@@ -90,18 +90,11 @@ pub(crate) struct Packer {
 impl Packer {
     pub fn new(path: &Path, writer: PageFileWriter) -> Self {
         let cap = writer.capacity();
-        Self { path: path.to_path_buf(), writer: Some(writer), cap, cur: Vec::with_capacity(cap), cur_page: 0 }
-    }
-
-    /// A packer that writes nothing: for computing addresses before writing.
-    pub fn dry_run(path: &Path, cap: usize, first_page: u64) -> Self {
-        Self { path: path.to_path_buf(), writer: None, cap, cur: Vec::new(), cur_page: first_page }
+        Self { path: path.to_path_buf(), writer, cap, cur: Vec::with_capacity(cap), cur_page: 0 }
     }
 
     fn emit(&mut self, payload: Option<&[u8]>) -> Result<()> {
-        if let Some(w) = &mut self.writer {
-            w.push(payload.unwrap_or(&self.cur))?;
-        }
+        self.writer.push(payload.unwrap_or(&self.cur))?;
         self.cur_page += 1;
         Ok(())
     }
@@ -135,11 +128,7 @@ impl Packer {
                 self.flush()?;
             }
             let addr = self.addr(self.cur.len())?;
-            if self.writer.is_some() {
-                self.cur.extend_from_slice(rec);
-            } else {
-                self.cur.resize(self.cur.len() + rec.len(), 0);
-            }
+            self.cur.extend_from_slice(rec);
             return Ok(addr);
         }
         self.flush()?;
@@ -154,16 +143,31 @@ impl Packer {
         Ok(addr)
     }
 
+    /// Writes the last page, puts `front` over the first pages (a metadata record that was put
+    /// first as a placeholder of the same length: only now are its counts known) and finishes
+    /// the file; returns (pages, file bytes).
+    pub fn finish_with_front(mut self, front: &[u8]) -> Result<(u64, u64)> {
+        self.flush()?;
+        rewrite_front(&mut self.writer, front)?;
+        self.finish()
+    }
+
     /// Writes the last page and finishes the file; returns (pages, file bytes).
     pub fn finish(mut self) -> Result<(u64, u64)> {
         self.flush()?;
         let pages = self.cur_page;
-        let bytes = match self.writer.take() {
-            Some(w) => w.finish()?,
-            None => 0,
-        };
-        Ok((pages, bytes))
+        Ok((pages, self.writer.finish()?))
     }
+}
+
+/// Writes `rec` over the first pages of `file` as [`Packer::put`] placed it there: a record that
+/// starts the file on page 0 and fills as many pages as it needs.
+pub(crate) fn rewrite_front(file: &mut PageFileWriter, rec: &[u8]) -> Result<()> {
+    let cap = file.capacity();
+    for (i, chunk) in rec.chunks(cap).enumerate() {
+        file.rewrite(i as u64, chunk)?;
+    }
+    Ok(())
 }
 
 /// A page file of a layout, with the record reader of the packing rule. It holds no page:

@@ -8,97 +8,112 @@
 //! each dense or, with sparse encoding on, as the shorter of the two forms of
 //! [`SparseCodec`](crate::vpage::SparseCodec).
 
-use std::path::Path;
-
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, SlotArray, record_pages};
-use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY, WriteCtx, layout_size};
+use super::writer::{Tally, WriteCtx};
+use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY};
 use crate::error::Result;
 use crate::page_reader::PageReader;
 use crate::pagefile::PageFileWriter;
-use crate::vpage::is_zero_page;
+use crate::vpage::{VEntry, is_zero_page};
 
 pub(crate) const INDEX_FILE: &str = "vindex.vertical";
 pub(crate) const VPAGES_FILE: &str = "vpages.vertical";
 pub(crate) const INDEX_TAG: [u8; 4] = *b"VTIX";
 pub(crate) const VPAGES_TAG: [u8; 4] = *b"VTVP";
 
-/// The V-page file of the vertical layouts, as written.
-pub(crate) struct CellVPages {
-    /// Per cell, the (node, address) of each stored V-page.
-    pub addrs: Vec<Vec<(u32, Addr)>>,
-    pub pages: u64,
-    pub bytes: u64,
+/// The V-page file of the vertical layouts, written cell after cell, dfs order within a cell.
+pub(crate) struct CellVPageWriter {
+    p: Packer,
+    buf: Vec<u8>,
 }
 
-/// Writes the visible V-pages of every cell, cell after cell, dfs order within a cell.
-pub(crate) fn write_cell_vpages(w: &WriteCtx<'_>, path: &Path, tag: [u8; 4]) -> Result<CellVPages> {
-    let mut p = Packer::new(path, PageFileWriter::create(path, tag, w.page_size)?);
-    let mut buf = Vec::new();
-    let mut addrs = Vec::with_capacity(w.data.cells.len());
-    for cell in &w.data.cells {
-        let mut a = Vec::with_capacity(cell.len());
+impl CellVPageWriter {
+    pub fn create(w: &WriteCtx, name: &str, tag: [u8; 4]) -> Result<Self> {
+        let path = w.dir.join(name);
+        Ok(Self { p: Packer::new(&path, PageFileWriter::create(&path, tag, w.page_size)?), buf: Vec::new() })
+    }
+
+    /// Stores the cell's visible V-pages; returns (node, address) of each, ascending node.
+    pub fn put_cell(&mut self, w: &WriteCtx, cell: &[(u32, Vec<VEntry>)], out: &mut Vec<(u32, Addr)>) -> Result<()> {
+        out.clear();
         for (node, entries) in cell {
             if is_zero_page(entries) {
                 continue;
             }
-            buf.clear();
-            w.encode_vpage(entries, &mut buf);
-            a.push((*node, p.put(&buf)?));
+            self.buf.clear();
+            w.encode_vpage(entries, &mut self.buf);
+            out.push((*node, self.p.put(&self.buf)?));
         }
-        addrs.push(a);
+        Ok(())
     }
-    let (pages, bytes) = p.finish()?;
-    Ok(CellVPages { addrs, pages, bytes })
+
+    /// Finishes the file; returns (pages, file bytes).
+    pub fn finish(self) -> Result<(u64, u64)> {
+        self.p.finish()
+    }
 }
 
-pub(crate) fn write(w: &WriteCtx<'_>) -> Result<LayoutSize> {
-    let data = w.data;
-    let nodes = data.node_fanout.len();
-    let cap = w.cap() as u64;
-    let CellVPages { addrs, pages: vp_pages, bytes: vp_bytes } =
-        write_cell_vpages(w, &w.dir.join(VPAGES_FILE), VPAGES_TAG)?;
+/// Writes the vertical layout cell by cell: each cell's V-pages, then its segment.
+pub(crate) struct Writer {
+    w: WriteCtx,
+    vpages: CellVPageWriter,
+    index: Packer,
+    data_start: u64,
+    flip: u64,
+    tally: Tally,
+    seg: Vec<Addr>,
+    addrs: Vec<(u32, Addr)>,
+    bytes: Vec<u8>,
+}
 
-    let meta_len = Meta::encoded_len(LayoutKind::Vertical, u64::from(data.cell_count), nodes as u64);
-    let data_start = record_pages(meta_len, cap);
-    let seg_len = (ADDR_BYTES * nodes) as u64;
-    let flip = record_pages(seg_len, cap);
-    let meta = Meta {
-        kind: LayoutKind::Vertical,
-        codec: w.codec,
-        sparse: w.sparse,
-        cell_count: data.cell_count,
-        node_count: nodes as u32,
-        data_start,
-        vpages_pages: vp_pages,
-        visible_total: w.stats.visible_total,
-        flip_pages_total: flip * u64::from(data.cell_count),
-        visible_max: w.stats.visible_max,
-        flip_pages_max: flip as u32,
-        fanout: data.node_fanout.clone(),
-        directory: Vec::new(),
-    };
-    let index_path = w.dir.join(INDEX_FILE);
-    let mut p = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
-    p.put(&meta.encode())?;
-    p.align()?;
-    let mut seg = vec![Addr::NIL; nodes];
-    let mut bytes = Vec::with_capacity(seg_len as usize);
-    for cell in &addrs {
-        seg.fill(Addr::NIL);
-        for &(node, addr) in cell {
-            seg[node as usize] = addr;
-        }
-        bytes.clear();
-        for a in &seg {
-            a.encode(&mut bytes);
-        }
-        p.put(&bytes)?;
+impl Writer {
+    pub fn create(w: WriteCtx) -> Result<Self> {
+        let nodes = w.fanout.len();
+        let cap = w.cap() as u64;
+        let vpages = CellVPageWriter::create(&w, VPAGES_FILE, VPAGES_TAG)?;
+        let meta_len = Meta::encoded_len(LayoutKind::Vertical, u64::from(w.cell_count), nodes as u64);
+        let data_start = record_pages(meta_len, cap);
+        let flip = record_pages((ADDR_BYTES * nodes) as u64, cap);
+        let index_path = w.dir.join(INDEX_FILE);
+        let mut index = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
+        // The metadata's counts are known at the end: a placeholder of its length until then.
+        index.put(&vec![0; meta_len as usize])?;
+        index.align()?;
+        let seg = vec![Addr::NIL; nodes];
+        Ok(Self {
+            w,
+            vpages,
+            index,
+            data_start,
+            flip,
+            tally: Tally::default(),
+            seg,
+            addrs: Vec::new(),
+            bytes: Vec::new(),
+        })
     }
-    let (_, ix_bytes) = p.finish()?;
-    Ok(layout_size(
-        vec![(INDEX_FILE.to_string(), ix_bytes), (VPAGES_FILE.to_string(), vp_bytes)],
-        vp_pages * u64::from(w.page_size),
-    ))
+
+    pub fn push(&mut self, cell: &[(u32, Vec<VEntry>)]) -> Result<()> {
+        self.vpages.put_cell(&self.w, cell, &mut self.addrs)?;
+        self.seg.fill(Addr::NIL);
+        for &(node, addr) in &self.addrs {
+            self.seg[node as usize] = addr;
+        }
+        self.bytes.clear();
+        for a in &self.seg {
+            a.encode(&mut self.bytes);
+        }
+        self.index.put(&self.bytes)?;
+        self.tally.add(cell);
+        Ok(())
+    }
+
+    pub fn finish(self) -> Result<LayoutSize> {
+        let (w, flip) = (&self.w, self.flip);
+        let flips = (flip * u64::from(w.cell_count), flip);
+        let meta = |vp_pages| w.meta(LayoutKind::Vertical, self.data_start, vp_pages, self.tally, flips, Vec::new());
+        w.finish_vertical(self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
+    }
 }
 
 /// Where the cells' segments lie (immutable, shared by all cursors).

@@ -5,14 +5,14 @@
 //! city too with `HDOV_BENCH_LARGE=1`). Criterion (`cargo bench --bench query`) gives the means;
 //! this gives the tails. Prints a Markdown table, with the machine.
 //!
-//! `cargo run --release -p hdov-tools --bin query-latency -- [N] [FILTER]` (N timed queries or
+//! `cargo run --release -p hdov-tools --bin query-latency -- [--db DB] [N] [FILTER]` (`--db`:
+//! that database instead of the fixtures, over its grid's avenue walk; N timed queries or
 //! steps per row, default 2,000, after one untimed pass over the viewpoints; only the rows whose
 //! name contains FILTER, e.g. `walk/` or `threshold-1e-3`, for profiling one of them).
 
 use std::time::Instant;
 
 use glam::Vec3;
-use hdov::city::CityScale;
 use hdov::{Database, QueryParams, SessionParams};
 use hdov_storage::{LayoutKind, PolicyKind};
 
@@ -20,7 +20,12 @@ use hdov_testkit::bench as common;
 use hdov_tools::experiments::quantile;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
+    let mut args = std::env::args().skip(1).peekable();
+    // `--db PATH`: measure that database instead of the fixtures (its grid's avenue walk).
+    let given = match args.next_if(|a| a == "--db") {
+        Some(_) => Some(std::path::PathBuf::from(args.next().ok_or("--db needs a database directory")?)),
+        None => None,
+    };
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(2_000).max(1);
     let filter = args.next().unwrap_or_default();
     println!("{}\n", hdov_tools::machine());
@@ -28,25 +33,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "| city | benchmark | p50 µs | p99 µs | mean µs | max µs | pages/query | nodes/query | items | slowest viewpoint: median µs (pages) |"
     );
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for scale in common::scales() {
-        let db = common::open_or_build(scale)?;
+    let dbs: Vec<(String, Database)> = match given {
+        Some(path) => vec![(path.display().to_string(), Database::open(&path)?)],
+        None => common::scales()
+            .into_iter()
+            .map(|s| Ok((s.to_string(), common::open_or_build(s)?)))
+            .collect::<Result<_, Box<dyn std::error::Error>>>()?,
+    };
+    for (scale, db) in &dbs {
+        let (scale, db) = (scale.as_str(), db);
         for (name, params) in common::point_configs() {
             let name = format!("point/{name}");
             if !name.contains(&filter) {
                 continue;
             }
-            let row = point_latency(&db, &params, n)?;
+            let row = point_latency(db, &params, n)?;
             print_row(scale, &name, &row);
         }
         for (name, flips) in [("walk/step-no-flip", false), ("walk/step-flip", true)] {
             if !name.contains(&filter) {
                 continue;
             }
-            let row = step_latency(&db, flips, n)?;
+            let row = step_latency(db, flips, n)?;
             print_row(scale, name, &row);
         }
         if "walk/avenue-flips".contains(filter.as_str()) {
-            print_row(scale, "walk/avenue-flips", &avenue_latency(&db, n)?);
+            print_row(scale, "walk/avenue-flips", &avenue_latency(db, n)?);
         }
     }
     Ok(())
@@ -155,7 +167,7 @@ fn avenue_latency(db: &Database, n: usize) -> hdov::Result<Row> {
     Ok(Row { micros, pages: per(pages), nodes: f64::NAN, items: per(items), slowest: None })
 }
 
-fn print_row(scale: CityScale, name: &str, row: &Row) {
+fn print_row(scale: &str, name: &str, row: &Row) {
     let mut v = row.micros.clone();
     v.sort_by(f64::total_cmp);
     let mean = v.iter().sum::<f64>() / v.len() as f64;
