@@ -353,7 +353,7 @@ fn shards_merge_into_the_whole_database() {
     let bytes_of = |dir: &str| -> u64 {
         std::fs::read_dir(tmp.path().join(dir)).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum()
     };
-    for f in ["tree.pages", "geometry.blob", "catalog.blob"] {
+    for f in ["tree.pages", "geometry.blob", "catalog.blob", "vpages.horizontal", "vpages.vertical"] {
         assert!(!tmp.path().join("shard1").join(f).exists(), "a shard keeps no {f}");
     }
     assert!(
@@ -416,10 +416,10 @@ fn shards_merge_into_the_whole_database() {
         assert_refused(&hdov(&["merge", &s("base"), &s("shard0"), &s(bad), &s("shard2"), "--out", &s("m6")]), why);
     }
     forge("shard2", "broken-file", &|_| {});
-    std::fs::write(tmp.path().join("broken-file/vpages.vertical"), b"HDOVPAGE").unwrap();
+    std::fs::write(tmp.path().join("broken-file/vpages.indexed-vertical"), b"HDOVPAGE").unwrap();
     assert_refused(
         &hdov(&["merge", &s("base"), &s("shard0"), &s("shard1"), &s("broken-file"), "--out", &s("m7")]),
-        "vpages.vertical",
+        "vpages.indexed-vertical",
     );
     assert!(!tmp.path().join("m6").exists() && !tmp.path().join("m7").exists());
     let merge = |base: &str, shards: [&str; 3], out: &str| {

@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use hdov_storage::{Layout, LayoutWriter, ReadMode, VShape};
+use hdov_storage::{Layout, LayoutKind, LayoutWriter, ReadMode, VShape};
 
 use super::vpages::for_each_cell;
 use super::{VisibilityParams, begin_write, layout_info, layout_options, write_manifest};
@@ -21,7 +21,8 @@ use crate::grid::ViewGrid;
 use crate::overwrite::Overwrite;
 
 /// One shard, checked to be one: its manifest, visibility parameters and results, grid, and the
-/// layout its cells are read from.
+/// layout its cells are read from (its kind, and whether it stores 4-byte NVOs; the layout is
+/// opened again when its cells are read, so one shard's mapping is held at a time).
 struct ShardDir {
     path: PathBuf,
     manifest: Manifest,
@@ -30,7 +31,8 @@ struct ShardDir {
     shard: Shard,
     grid: ViewGrid,
     against: Vec<FileChecksum>,
-    layout: Layout,
+    layout: LayoutKind,
+    wide_nvo: bool,
 }
 
 impl ShardDir {
@@ -46,14 +48,20 @@ impl ShardDir {
             .measured_against
             .clone()
             .ok_or_else(|| Error::bad_file(path, "is a shard that keeps the whole scene: rebuild it with this hdov"))?;
-        let kind = *params.layouts.first().ok_or_else(|| Error::bad_file(path, "holds no layout"))?;
+        // The layout the shard wrote (indexed-vertical; earlier shards wrote every layout).
+        let kind = info
+            .layouts
+            .first()
+            .and_then(|l| l.name.parse::<LayoutKind>().ok())
+            .ok_or_else(|| Error::bad_file(path, "holds no layout"))?;
         let layout = Layout::open(path, kind, ReadMode::Mmap)?;
         let file = path.join(kind.file_names()[0]);
         if u64::from(layout.node_count()) != manifest.counts.nodes || u64::from(layout.cell_count()) != manifest.counts.cells
         {
             return Err(Error::bad_file(file, format!("{kind} layout's node or cell count differs from the manifest's")));
         }
-        Ok(ShardDir { path: path.to_path_buf(), manifest, params, info, shard, grid, against, layout })
+        let wide_nvo = layout.codec().nvo_bytes > 2;
+        Ok(ShardDir { path: path.to_path_buf(), manifest, params, info, shard, grid, against, layout: kind, wide_nvo })
     }
 }
 
@@ -110,7 +118,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
     // merge holds one cell's V-pages and the writers' buffers, whatever the grid. The V-entry
     // width is fixed before the first cell: 4-byte NVOs where any shard needed them, as a
     // whole build would have chosen from the same NVOs.
-    let wide = dirs.iter().any(|s| s.layout.codec().nvo_bytes > 2);
+    let wide = dirs.iter().any(|s| s.wide_nvo);
     let shape = VShape {
         cell_count: grid.cell_count() as u32,
         node_fanout: (0..base_db.node_count())
@@ -139,7 +147,8 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
             return Err(Error::bad_file(&s.path, format!("starts at cell {}, not {next}", range.start)));
         }
         next = range.end;
-        for_each_cell(&s.layout, range.start as u32..range.end as u32, |_, pages| {
+        let layout = Layout::open(&s.path, s.layout, ReadMode::Mmap)?;
+        for_each_cell(&layout, range.start as u32..range.end as u32, |_, pages| {
             writers.iter_mut().try_for_each(|w| w.push_cell(&pages)).map_err(Error::from)
         })?;
         info.cells_computed += s.info.cells_computed;

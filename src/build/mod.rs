@@ -375,7 +375,7 @@ fn build_visibility(
     )?;
     bar.finish_and_clear();
     let data = vpages::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);
-    let layouts = write_layouts(dir, &v.layouts, &data, page_size, v.dov_codec)?;
+    let layouts = write_layouts(dir, &v.stored_layouts(), &data, page_size, v.dov_codec)?;
     Ok(VisibilityInfo {
         backend: backend.name(),
         cells_computed: dov.cells.len() as u64,

@@ -40,6 +40,8 @@ pub struct CityArgs {
     /// Blocks along x and z, e.g. 12x12 (overrides the scale's count).
     #[arg(long, value_parser = parse_dims::<2>)]
     blocks: Option<[u32; 2]>,
+    /// tiny (~50 objects), small (~440), default (~2,200), large (~11,300, the thesis's) or huge
+    /// (~115,000; its visibility needs about 20 GB: docs/sharding.md).
     #[arg(long, default_value = "default")]
     scale: CityScale,
     /// A real mesh (OBJ) to instance as the dense detail model, e.g. the Stanford bunny.

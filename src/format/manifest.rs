@@ -226,7 +226,7 @@ impl Manifest {
                 return Err(format!("{} cells computed of {}", v.cells_computed, c.cells));
             }
             let names: Vec<&str> = v.layouts.iter().map(|l| l.name.as_str()).collect();
-            let built: Vec<String> = params.layouts.iter().map(|k| k.to_string()).collect();
+            let built: Vec<String> = params.stored_layouts().iter().map(|k| k.to_string()).collect();
             if names != built {
                 return Err(format!("layouts {names:?} differ from those built, {built:?}"));
             }

@@ -536,6 +536,17 @@ impl Default for VisibilityParams {
 }
 
 impl VisibilityParams {
+    /// The layouts a build with these parameters writes: those asked for, but a shard writes
+    /// indexed-vertical alone, the one layout that stores nothing for cells it did not compute
+    /// (horizontal keeps a slot per cell and node: the large city's shards were 347 MB each,
+    /// nearly all zeros); the merge writes the layouts asked for.
+    pub fn stored_layouts(&self) -> Vec<hdov_storage::LayoutKind> {
+        match self.shard {
+            Some(_) => vec![hdov_storage::LayoutKind::IndexedVertical],
+            None => self.layouts.clone(),
+        }
+    }
+
     /// The shard this build computes ([`Shard::ALL`] without one).
     pub fn shard(&self) -> Shard {
         self.shard.unwrap_or(Shard::ALL)

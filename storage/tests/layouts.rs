@@ -328,3 +328,42 @@ fn misuse_is_an_error() {
     assert_eq!(LayoutKind::Vertical.to_string(), "vertical");
     assert!("diagonal".parse::<LayoutKind>().is_err());
 }
+
+/// A layout written cell by cell refuses what does not fit its shape, in one error, and a
+/// writer finished early writes nothing that opens.
+#[test]
+fn layout_writer_refuses_what_breaks_its_shape() {
+    use hdov_storage::{LayoutWriter, VShape};
+    let data = synthetic_vdata(&SyntheticSpec { cells: 5, fanout: 4, levels: 2, ..Default::default() });
+    let shape = VShape::of(&data);
+    let opts = LayoutOptions { page_size: 256, ..Default::default() };
+    for kind in LayoutKind::ALL {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = LayoutWriter::create(dir.path(), kind, &shape, &opts).unwrap();
+        // An NVO above the shape's largest would not fit the field width chosen for it.
+        let mut big = data.cells[0].clone();
+        if let Some((_, e)) = big.first_mut() {
+            e[0].nvo = shape.nvo_max + 1;
+            assert!(w.push_cell(&big).is_err(), "{kind}: NVO above the shape");
+        }
+        // Nodes out of order, and out of range.
+        let fanout = data.node_fanout[0] as usize;
+        let entry = VEntry { dov: 0.5, nvo: 1 };
+        assert!(w.push_cell(&[(1, vec![entry; data.node_fanout[1] as usize]), (0, vec![entry; fanout])]).is_err());
+        assert!(w.push_cell(&[(data.node_fanout.len() as u32, vec![entry; 1])]).is_err());
+        for cell in &data.cells[..4] {
+            w.push_cell(cell).unwrap();
+        }
+        let msg = w.finish().unwrap_err().to_string();
+        assert!(msg.contains("4 of 5 cells"), "{kind}: {msg}");
+        assert!(Layout::open(dir.path(), kind, ReadMode::Mmap).is_err(), "{kind}: a half-written layout opened");
+        // One cell too many.
+        let mut w = LayoutWriter::create(dir.path(), kind, &shape, &opts).unwrap();
+        for cell in &data.cells {
+            w.push_cell(cell).unwrap();
+        }
+        assert!(w.push_cell(&data.cells[0]).is_err(), "{kind}: a sixth cell of five");
+        w.finish().unwrap();
+        Layout::open(dir.path(), kind, ReadMode::Mmap).unwrap().verify().unwrap();
+    }
+}

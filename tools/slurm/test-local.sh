@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # A sharded build on a real scheduler: a single-node Slurm (munged, slurmctld, slurmd on
 # localhost, as root, without systemd) runs the base build (`hdov build --no-visibility`: tree,
-# LODs, catalog) as one job, `hdov build --shard $SLURM_ARRAY_TASK_ID/N` as an array job (each
-# shard keeps only its cells' V-data), and `hdov merge BASE SHARDS…` as a job that depends on
-# both (afterok); one task is cancelled mid-run and requeued. The merged database must equal a
+# LODs, catalog) as one job, `hdov build --shard $SLURM_ARRAY_TASK_ID/N --base BASE` as an array
+# job after it (afterok; each shard keeps only its cells' V-data, measured against the base's
+# tree and LODs), and `hdov merge BASE SHARDS…` as a job after both; one task is cancelled
+# mid-run and requeued. The merged database must equal a
 # whole build, every data file byte for byte. Prints the wall times and the bytes the shards
 # and the base wrote.
 #
@@ -136,7 +137,7 @@ cat >"$WORK/shard.sh" <<EOF
 #!/bin/bash
 sleep 2
 exec "$HDOV" build "$SCENE" --out "$WORK/data/shard\$SLURM_ARRAY_TASK_ID.hdov" \\
-  --shard \$SLURM_ARRAY_TASK_ID/$N --backend cpu --force
+  --shard \$SLURM_ARRAY_TASK_ID/$N --base "$WORK/data/base.hdov" --backend cpu --force
 EOF
 cat >"$WORK/base.sh" <<EOF
 #!/bin/bash
@@ -149,15 +150,16 @@ EOF
 chmod +x "$WORK/base.sh" "$WORK/shard.sh" "$WORK/merge.sh"
 t2=$(date +%s.%N)
 BASE=$(sbatch --parsable -c 1 -o "$WORK/log/base.log" "$WORK/base.sh") || fail "sbatch of the base build failed"
-ARRAY=$(sbatch --parsable --requeue --array=0-$((N - 1)) -c 1 -o "$WORK/log/shard-%a.log" "$WORK/shard.sh") \
+ARRAY=$(sbatch --parsable --requeue --array=0-$((N - 1)) -c 1 --dependency=afterok:"$BASE" \
+  -o "$WORK/log/shard-%a.log" "$WORK/shard.sh") \
   || fail "sbatch of the array job failed"
 MERGE=$(sbatch --parsable --dependency=afterok:"$BASE":"$ARRAY" -o "$WORK/log/merge.log" "$WORK/merge.sh") \
   || fail "sbatch of the merge job failed"
-echo "slurm: base job $BASE, array job $ARRAY ($N shards), merge job $MERGE after both"
+echo "slurm: base job $BASE, array job $ARRAY ($N shards) after it, merge job $MERGE after both"
 
 # Cancel one running task and put it back in the queue.
 VICTIM=$((N - 1))
-for _ in $(seq 300); do
+for _ in $(seq 600); do
   state=$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%T' 2>/dev/null || true)
   [ "$state" = RUNNING ] && break
   sleep 0.1

@@ -33,6 +33,7 @@ pub const BUDGET_FACES: u64 = 20_000;
 pub fn point_configs() -> Vec<(String, QueryParams)> {
     let threshold = |eta: f64| QueryParams { mode: Mode::Threshold, eta, ..Default::default() };
     let mut configs = vec![
+        ("default".to_string(), QueryParams::default()),
         ("threshold-0".to_string(), threshold(0.0)),
         ("threshold-1e-4".to_string(), threshold(1e-4)),
         ("threshold-1e-3".to_string(), threshold(1e-3)),
