@@ -5,7 +5,7 @@
 //! 2. internal chains depth first ([`crate::lod::internal_lods`]), each node's leaf parts read
 //!    back from `geometry.blob`, each finished chain spilled to a temporary blob file in the
 //!    database's temporary directory;
-//! 3. the byte budget's trim ([`hlod::trim`]) on the chains' sizes alone, then the kept levels
+//! 3. the byte budget's trim ([`crate::lod::budget_drops`]) on the chains' sizes alone, then the kept levels
 //!    copied from the spill into `geometry.blob` in node order, and the spill removed.
 //!
 //! The geometry file is the same, byte for byte, as building every chain in memory and writing
@@ -20,8 +20,8 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::format::catalog::LodRef;
-use crate::lod::hlod::{self, LevelSize};
-use crate::lod::{InternalLods, LeafChains, LodLevel, LodParams, internal_lods, leaf_chain};
+use crate::lod::hlod::LevelSize;
+use crate::lod::{LeafChains, LodLevel, LodParams, budget_drops, internal_lods, leaf_chain};
 use crate::progress::Report;
 use crate::rtree::RTree;
 use crate::scene::{Mesh, Scene};
@@ -123,14 +123,8 @@ pub(crate) fn build_and_store(
     internal_lods(scene, tree, params, &leaf, progress, &store)?;
     let spilled = spilled.into_inner().expect("no panics while held");
     let mut spill = spill.into_inner().expect("no panics while held");
-    let drops = match params.internal {
-        // The internal levels together weigh at most what the leaf chains weigh.
-        InternalLods::Hlod => {
-            let sizes: Vec<Vec<LevelSize>> = spilled.iter().map(|c| c.iter().map(|(e, _)| e.size).collect()).collect();
-            hlod::trim(&sizes, tree, leaf_bytes)
-        }
-        InternalLods::Thesis => vec![0; spilled.len()],
-    };
+    let sizes: Vec<Vec<LevelSize>> = spilled.iter().map(|c| c.iter().map(|(e, _)| e.size).collect()).collect();
+    let drops = budget_drops(params, &sizes, tree, leaf_bytes);
     let from_spill = spill.reader()?;
     let mut node_lods = Vec::with_capacity(spilled.len());
     for (chain, drop) in spilled.iter().zip(drops) {

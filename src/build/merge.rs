@@ -1,6 +1,6 @@
 //! Joining shards (`hdov build --shard I/N`) into one database.
 //!
-//! A shard keeps only the V-pages of its own cells and names, by size and crc32, the tree,
+//! A shard keeps only the V-pages of its own cells and names, by size and SHA-256, the tree,
 //! catalog and geometry it was measured against (a build is deterministic, so every shard of
 //! one build names the same files). The merge takes those files from a base build of the same
 //! scene and parameters (`hdov build --no-visibility`), checks that every shard was measured
@@ -16,7 +16,7 @@ use super::{VisibilityParams, begin_write, layout_info, layout_options, write_ma
 use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
-use crate::format::{CATALOG_FILE, FileChecksum, GEOMETRY_FILE, Manifest, TREE_FILE, VisibilityInfo};
+use crate::format::{FileChecksum, Manifest, SCENE_FILES, VisibilityInfo};
 use crate::grid::ViewGrid;
 use crate::overwrite::Overwrite;
 
@@ -73,10 +73,7 @@ impl ShardDir {
 /// writers' buffers (one page per node for horizontal); the scene files are copied, not read.
 pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) -> Result<Manifest> {
     let base_db = Database::open(base)?;
-    let files = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE]
-        .iter()
-        .map(|f| FileChecksum::of(base, f))
-        .collect::<Result<Vec<_>>>()?;
+    let files = FileChecksum::of_scene_files(base)?;
     let base_manifest = base_db.manifest();
     let grid = base_manifest.grid.ok_or_else(|| Error::bad_file(base, "holds no viewing grid"))?;
     let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shards given"))?;
@@ -85,14 +82,13 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
     let count = first.shard.count;
     let mut seen = vec![None::<&Path>; count as usize];
     // A shard belongs to the base if their builds differ in nothing but visibility.
-    let without_visibility = |m: &Manifest| crate::format::params::BuildParams { visibility: None, ..m.build.clone() };
     for s in &dirs {
         let mut params = s.params.clone();
         params.shard = first.params.shard;
         if s.shard.count != count || params != first.params {
             return Err(Error::bad_file(&s.path, format!("was built with other parameters than {}", first_path.display())));
         }
-        if without_visibility(&s.manifest) != without_visibility(base_manifest) || s.grid != grid {
+        if s.manifest.build.without_visibility() != base_manifest.build.without_visibility() || s.grid != grid {
             return Err(Error::bad_file(&s.path, format!("was built with other parameters than {}", base.display())));
         }
         if s.against != files {
@@ -111,7 +107,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
     }
 
     let txn = begin_write(out, overwrite)?;
-    for f in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
+    for f in SCENE_FILES {
         hdov_storage::copy_file_synced(&base.join(f), &txn.path().join(f))?;
     }
     // Every cell, in order, goes straight from its shard's layout into every new layout: the

@@ -18,14 +18,14 @@ use serde::Serialize;
 
 use crate::dov::gpu::GpuOptions;
 use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
-use crate::dov::{BackendKind, WithRays, open_backend};
+use crate::dov::{WithRays, open_backend};
 use crate::error::{Error, Param, Result};
 use crate::format::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
 pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
 use crate::format::tree_page::{self, NodePage};
 use crate::format::{
     CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileChecksum, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
-    MANIFEST_FILE, Manifest, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
+    MANIFEST_FILE, Manifest, SCENE_FILES, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
 };
 use crate::grid::ViewGrid;
 use crate::lod::LodLevel;
@@ -101,8 +101,7 @@ pub fn build(
     let t = Instant::now();
     let ladder = crate::lod::hlod::ErrorLadder::of(scene);
     // Drawing by LOD on the GPU needs the leaf chains in memory; nothing else does.
-    let draws_lods =
-        params.visibility.as_ref().is_some_and(|v| v.backend != BackendKind::Cpu && v.lod_draw_tolerance > 0.0);
+    let draws_lods = params.visibility.as_ref().is_some_and(VisibilityParams::draws_lods);
     let leaf_lods = if draws_lods { Some(stored.leaf_chains(&geometry_path)?) } else { None };
     let lods::StoredLods { mesh_lods, node_lods, .. } = stored;
 
@@ -161,7 +160,7 @@ pub fn build(
     };
     let is_shard = manifest.build.visibility.as_ref().is_some_and(|v| v.shard.is_some());
     let mut against = Vec::new();
-    for name in [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE] {
+    for name in SCENE_FILES {
         let path = dir.join(name);
         if is_shard {
             // A shard keeps its V-data only: the scene's files are named, not stored, and the
@@ -215,17 +214,13 @@ pub fn build_shard_on(
     progress: &Progress,
 ) -> Result<BuildReport> {
     check_inputs(scene, params)?;
-    let (Some(v), Some(grid)) = (&params.visibility, &scene.grid) else {
+    let (Some(v), Some(grid)) = (params.visibility.as_ref().filter(|v| v.shard.is_some()), &scene.grid) else {
         return Err(Error::bad_param(Param::Base, "a base is for shard builds: give --shard I/N"));
     };
-    if v.shard.is_none() {
-        return Err(Error::bad_param(Param::Base, "a base is for shard builds: give --shard I/N"));
-    }
     let db = crate::db::Database::open(base)?;
     let mut manifest = db.manifest().clone();
     let other = |what: &str| Error::bad_file(base, format!("was built from {what} than this shard's"));
-    if (BuildParams { visibility: None, ..manifest.build.clone() }) != (BuildParams { visibility: None, ..params.clone() })
-    {
+    if manifest.build.without_visibility() != params.without_visibility() {
         return Err(other("other parameters"));
     }
     let counts = (scene.objects.len() as u64, scene.meshes.len() as u64, scene.triangle_count(), scene.stored_triangle_count());
@@ -242,14 +237,12 @@ pub fn build_shard_on(
     write_tree(&dir, &tree, params.page_size)?;
     let ours = FileChecksum::of(&dir, TREE_FILE)?;
     std::fs::remove_file(dir.join(TREE_FILE)).map_err(|e| Error::io(dir.join(TREE_FILE), e))?;
-    let against =
-        [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE].iter().map(|f| FileChecksum::of(base, f)).collect::<Result<Vec<_>>>()?;
+    let against = FileChecksum::of_scene_files(base)?;
     if against[0] != ours {
         return Err(Error::bad_file(base, "was built from another scene than this shard's: its tree differs"));
     }
     let t = Instant::now();
-    let draws_lods = v.backend != BackendKind::Cpu && v.lod_draw_tolerance > 0.0;
-    let leaf_lods = match draws_lods {
+    let leaf_lods = match v.draws_lods() {
         true => Some(
             db.catalog()
                 .mesh_lods

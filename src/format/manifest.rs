@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::params::BuildParams;
-use super::{CATALOG_FILE, FORMAT_VERSION, GEOMETRY_FILE, MANIFEST_FILE, TREE_FILE};
+use super::{FORMAT_VERSION, MANIFEST_FILE, SCENE_FILES};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::rtree::TreeStats;
@@ -73,24 +73,18 @@ impl FileChecksum {
     /// The size and SHA-256 of `dir/name`, as a shard names it and a merge compares it.
     pub fn of(dir: &Path, name: &str) -> Result<FileChecksum> {
         use sha2::{Digest, Sha256};
-        use std::io::Read;
         let path = dir.join(name);
         let io = |e| Error::io(&path, e);
         // Streamed: a huge scene's geometry is gigabytes.
-        let mut file = std::fs::File::open(&path).map_err(io)?;
-        let (mut hasher, mut bytes, mut buf) = (Sha256::new(), 0u64, vec![0u8; 1 << 20]);
-        loop {
-            let n = match file.read(&mut buf) {
-                Ok(0) => break,
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(io(e)),
-            };
-            hasher.update(&buf[..n]);
-            bytes += n as u64;
-        }
+        let mut hasher = Sha256::new();
+        let bytes = std::io::copy(&mut std::fs::File::open(&path).map_err(io)?, &mut hasher).map_err(io)?;
         let sha256 = hasher.finalize().iter().map(|b| format!("{b:02x}")).collect();
         Ok(FileChecksum { name: name.into(), bytes, sha256 })
+    }
+
+    /// [`FileChecksum::of`] each of the [`SCENE_FILES`] in `dir`, in that order.
+    pub fn of_scene_files(dir: &Path) -> Result<Vec<FileChecksum>> {
+        SCENE_FILES.iter().map(|f| FileChecksum::of(dir, f)).collect()
     }
 }
 
@@ -116,7 +110,7 @@ pub struct Manifest {
     /// What the visibility stage measured and wrote (`None`: built without visibility).
     pub visibility: Option<VisibilityInfo>,
     /// A shard (`hdov build --shard`) keeps only its cells' V-data: the tree, catalog and
-    /// geometry it was measured against are named here, by size and crc32, not stored; `hdov
+    /// geometry it was measured against are named here, by size and SHA-256, not stored; `hdov
     /// merge` takes them from a base build and refuses a shard whose files differ. Absent in a
     /// whole database.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -201,7 +195,7 @@ impl Manifest {
             return Err("visibility results without their parameters".into());
         }
         let mut expected: Vec<&FileEntry> = self.files.iter().collect();
-        let invariant = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE];
+        let invariant = SCENE_FILES;
         match &self.measured_against {
             None => {
                 if let Some(name) = invariant.iter().find(|n| !self.files.iter().any(|f| f.name == **n)) {

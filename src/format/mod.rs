@@ -26,6 +26,9 @@ pub const MANIFEST_FILE: &str = "manifest.json";
 pub const TREE_FILE: &str = "tree.pages";
 pub const GEOMETRY_FILE: &str = "geometry.blob";
 pub const CATALOG_FILE: &str = "catalog.blob";
+/// The view-invariant files: the scene as a database stores it, which a shard names and does
+/// not keep, and a merge takes from the base build.
+pub const SCENE_FILES: [&str; 3] = [TREE_FILE, GEOMETRY_FILE, CATALOG_FILE];
 pub const TREE_KIND: [u8; 4] = *b"TREE";
 pub const GEOMETRY_KIND: [u8; 4] = *b"GEOM";
 pub const CATALOG_KIND: [u8; 4] = *b"CATL";

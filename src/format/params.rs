@@ -547,6 +547,12 @@ impl VisibilityParams {
         }
     }
 
+    /// Whether the build draws objects at their leaf LODs (the GPU backend with a tolerance), and
+    /// so needs the leaf chains in memory for the visibility stage.
+    pub fn draws_lods(&self) -> bool {
+        self.backend != BackendKind::Cpu && self.lod_draw_tolerance > 0.0
+    }
+
     /// The shard this build computes ([`Shard::ALL`] without one).
     pub fn shard(&self) -> Shard {
         self.shard.unwrap_or(Shard::ALL)
@@ -554,6 +560,11 @@ impl VisibilityParams {
 }
 
 impl BuildParams {
+    /// These parameters less visibility: what a shard and its base build must share.
+    pub fn without_visibility(&self) -> BuildParams {
+        BuildParams { visibility: None, ..self.clone() }
+    }
+
     /// Most entries per node: `fanout`, else [`DEFAULT_FANOUT`], at most what a page holds.
     pub fn max_entries(&self) -> usize {
         let page = crate::format::tree_page::fanout(self.page_size);

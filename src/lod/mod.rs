@@ -72,20 +72,23 @@ pub fn build_scene_lods(scene: &Scene, tree: &RTree, params: &LodParams, progres
     };
     internal_lods(scene, tree, params, &leaf, progress, &store).expect("in-memory chains cannot fail");
     let mut internal = built.into_inner().expect("no panics while held");
-    if params.internal == InternalLods::Hlod {
-        // The internal levels together weigh at most what the leaf chains weigh.
-        let leaf_bytes: usize = leaf.iter().flatten().map(hlod::mesh_bytes).sum();
-        let drops = hlod::trim(&level_sizes(&internal), tree, leaf_bytes);
-        for (chain, drop) in internal.iter_mut().zip(drops) {
-            chain.drain(..drop);
-        }
+    let sizes: Vec<Vec<hlod::LevelSize>> =
+        internal.iter().map(|c| c.iter().map(hlod::LevelSize::of).collect()).collect();
+    let leaf_bytes: usize = leaf.iter().flatten().map(hlod::mesh_bytes).sum();
+    for (chain, drop) in internal.iter_mut().zip(budget_drops(params, &sizes, tree, leaf_bytes)) {
+        chain.drain(..drop);
     }
     SceneLods { leaf, internal }
 }
 
-/// The bytes and faces of each level of each chain, as [`hlod::trim`] weighs them.
-pub fn level_sizes(chains: &[Vec<LodLevel>]) -> Vec<Vec<hlod::LevelSize>> {
-    chains.iter().map(|c| c.iter().map(hlod::LevelSize::of).collect()).collect()
+/// How many finest levels each internal chain (`sizes`, per node) loses to the byte budget:
+/// by geometric error, the internal levels together weigh at most the leaf chains'
+/// `leaf_bytes` ([`hlod::trim`]); the thesis's chains are kept whole.
+pub fn budget_drops(params: &LodParams, sizes: &[Vec<hlod::LevelSize>], tree: &RTree, leaf_bytes: usize) -> Vec<usize> {
+    match params.internal {
+        InternalLods::Hlod => hlod::trim(sizes, tree, leaf_bytes),
+        InternalLods::Thesis => vec![0; sizes.len()],
+    }
 }
 
 /// Where a node's parts find the leaf chains of its objects' base meshes: in memory, or read

@@ -13,7 +13,7 @@ use super::writer::{Tally, WriteCtx};
 use super::{LayoutKind, LayoutSize, Meta, layout_size};
 use crate::error::Result;
 use crate::pagefile::PageFileWriter;
-use crate::vpage::{VEntry, is_zero_page};
+use crate::vpage::{VEntry, VPageCodec, is_zero_page};
 
 pub(crate) const VPAGES_FILE: &str = "vpages.horizontal";
 pub(crate) const TAG: [u8; 4] = *b"HZVP";
@@ -40,12 +40,8 @@ impl Writer {
         let path = w.dir.join(VPAGES_FILE);
         let meta_len = Meta::encoded_len(LayoutKind::Horizontal, u64::from(w.cell_count), w.fanout.len() as u64);
         let data_start = super::record_pages(meta_len, cap);
-        let mut first = Vec::with_capacity(w.fanout.len());
-        let mut page = data_start;
-        for &f in &w.fanout {
-            first.push(page);
-            page += slots(w.codec.vpage_bytes(f) as u64, cap).pages(u64::from(w.cell_count)).unwrap_or(0);
-        }
+        let (first, page) = run_starts(&w.fanout, w.codec, w.cell_count, data_start, cap, u64::MAX)
+            .ok_or_else(|| crate::error::Error::invalid(&path, "V-page runs beyond 2^64 pages"))?;
         let mut file = PageFileWriter::create(&path, TAG, w.page_size)?;
         file.extend_to(page)?;
         let open = vec![Vec::new(); w.fanout.len()];
@@ -102,11 +98,33 @@ impl Writer {
         let pages = self.file.page_count();
         let meta = self.w.meta(LayoutKind::Horizontal, self.data_start, pages, self.tally, (0, 0), Vec::new());
         rewrite_front(&mut self.file, &meta.encode())?;
-        let pages = self.file.page_count();
         let page_size = u64::from(self.w.page_size);
         let bytes = self.file.finish()?;
         Ok(layout_size(vec![(VPAGES_FILE.to_string(), bytes)], (pages - self.data_start) * page_size))
     }
+}
+
+/// Where each node's run of V-pages starts, for `cells` slots of each node's V-page size
+/// packed from page `data_start` on, and the page after the last run; `None` if a run would
+/// end past page `limit` (a reader's file length) or overflow.
+fn run_starts(
+    fanout: &[u16],
+    codec: VPageCodec,
+    cells: u32,
+    data_start: u64,
+    cap: u64,
+    limit: u64,
+) -> Option<(Vec<u64>, u64)> {
+    let mut first = Vec::with_capacity(fanout.len());
+    let mut page = data_start;
+    for &f in fanout {
+        first.push(page);
+        page = slots(codec.vpage_bytes(f) as u64, cap).pages(u64::from(cells)).and_then(|n| page.checked_add(n))?;
+        if page > limit {
+            return None;
+        }
+    }
+    Some((first, page))
 }
 
 fn slots(size: u64, cap: u64) -> SlotArray {
@@ -122,18 +140,9 @@ pub(crate) struct Runs {
 impl Runs {
     pub fn new(meta: &Meta, file: &PagedFile) -> Result<Self> {
         let cap = file.file.capacity() as u64;
-        let mut first = Vec::with_capacity(meta.fanout.len());
-        let mut page = meta.data_start;
-        for &f in &meta.fanout {
-            first.push(page);
-            let run = slots(meta.codec.vpage_bytes(f) as u64, cap)
-                .pages(u64::from(meta.cell_count))
-                .and_then(|n| page.checked_add(n));
-            page = match run {
-                Some(p) if p <= file.file.page_count() => p,
-                _ => return Err(file.corrupt("V-page runs exceed the file")),
-            };
-        }
+        let (first, page) =
+            run_starts(&meta.fanout, meta.codec, meta.cell_count, meta.data_start, cap, file.file.page_count())
+                .ok_or_else(|| file.corrupt("V-page runs exceed the file"))?;
         if page != file.file.page_count() {
             return Err(
                 file.corrupt(format!("V-page runs end at page {page}, file has {} pages", file.file.page_count()))

@@ -14,7 +14,6 @@ use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY};
 use crate::error::Result;
 use crate::le::u32_at;
 use crate::page_reader::PageReader;
-use crate::pagefile::PageFileWriter;
 use crate::vpage::VEntry;
 
 pub(crate) const INDEX_FILE: &str = "vindex.indexed-vertical";
@@ -45,11 +44,7 @@ impl Writer {
         let vpages = CellVPageWriter::create(&w, VPAGES_FILE, VPAGES_TAG)?;
         let meta_len = Meta::encoded_len(LayoutKind::IndexedVertical, u64::from(w.cell_count), w.fanout.len() as u64);
         let data_start = record_pages(meta_len, w.cap() as u64);
-        let index_path = w.dir.join(INDEX_FILE);
-        let mut index = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
-        // The metadata holds the directory, known at the end: a placeholder of its length.
-        index.put(&vec![0; meta_len as usize])?;
-        index.align()?;
+        let index = w.index_after_placeholder(INDEX_FILE, INDEX_TAG, meta_len)?;
         let directory = Vec::with_capacity(w.cell_count as usize);
         Ok(Self {
             w,

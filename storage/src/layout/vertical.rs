@@ -74,11 +74,7 @@ impl Writer {
         let meta_len = Meta::encoded_len(LayoutKind::Vertical, u64::from(w.cell_count), nodes as u64);
         let data_start = record_pages(meta_len, cap);
         let flip = record_pages((ADDR_BYTES * nodes) as u64, cap);
-        let index_path = w.dir.join(INDEX_FILE);
-        let mut index = Packer::new(&index_path, PageFileWriter::create(&index_path, INDEX_TAG, w.page_size)?);
-        // The metadata's counts are known at the end: a placeholder of its length until then.
-        index.put(&vec![0; meta_len as usize])?;
-        index.align()?;
+        let index = w.index_after_placeholder(INDEX_FILE, INDEX_TAG, meta_len)?;
         let seg = vec![Addr::NIL; nodes];
         Ok(Self {
             w,

@@ -74,6 +74,18 @@ impl WriteCtx {
         }
     }
 
+    /// A vertical layout's index file, its first `meta_len` bytes a placeholder for the metadata
+    /// record, whose counts (and, for indexed-vertical, directory) are known only at the end
+    /// ([`WriteCtx::finish_vertical`] puts it there).
+    pub fn index_after_placeholder(&self, name: &str, tag: [u8; 4], meta_len: u64) -> Result<super::packing::Packer> {
+        let path = self.dir.join(name);
+        let mut index =
+            super::packing::Packer::new(&path, crate::pagefile::PageFileWriter::create(&path, tag, self.page_size)?);
+        index.put(&vec![0; meta_len as usize])?;
+        index.align()?;
+        Ok(index)
+    }
+
     /// Finishes a vertical layout's two files: the V-pages, then the index with `meta` over its
     /// placeholder.
     pub fn finish_vertical(
