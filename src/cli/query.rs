@@ -390,11 +390,11 @@ pub(super) fn demo_queries(db: &Database, json: bool) -> Result<(serde_json::Val
         ("threshold η = 0", QueryParams { eta: 0.0, ..Default::default() }),
         ("threshold η = 1e-4", QueryParams { eta: 1e-4, ..Default::default() }),
         ("threshold η = 1e-3", QueryParams { eta: 1e-3, ..Default::default() }),
-        ("threshold η = 4e-3", QueryParams { eta: 4e-3, ..Default::default() }),
+        ("threshold η = 3e-2", QueryParams { eta: 3e-2, ..Default::default() }),
         ("budget 20k faces", QueryParams { mode: Mode::Budget, budget: 20_000, ..Default::default() }),
         ("vmsse τ = 1 px", QueryParams { mode: Mode::Vmsse, ..Default::default() }),
         ("frustum, looking +x", QueryParams { mode: Mode::Frustum, camera: Some(ahead), ..Default::default() }),
-        ("η = 4e-3, looking +x", QueryParams { camera: Some(ahead), ..Default::default() }),
+        ("η = 3e-2, looking +x", QueryParams { camera: Some(ahead), ..Default::default() }),
     ];
     let mut queries = Vec::new();
     if !json {
@@ -420,7 +420,7 @@ pub(super) fn demo_queries(db: &Database, json: bool) -> Result<(serde_json::Val
     let steps = path.iter().map(|&(at, look)| session.step(at, Some(look))).collect::<Result<Vec<_>>>()?;
     let summary = summarise(&steps);
     if !json {
-        print!("walk along the first avenue, η = 4e-3, DoV-Time cache of 64 pages: ");
+        print!("walk along the first avenue, η = 3e-2, DoV-Time cache of 64 pages: ");
         print_summary(&summary);
     }
     Ok((serde_json::Value::Array(queries), serde_json::to_value(&summary).expect("serialisable"), (at, along)))

@@ -37,7 +37,17 @@ pub(super) fn run(
     params: &QueryParams,
     cull: bool,
 ) -> Result<Found> {
-    let mut t = Traversal { db, access, at, cell_box, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
+    let mut t = Traversal {
+        db,
+        access,
+        at,
+        cell_box,
+        params,
+        items: Vec::new(),
+        nodes_visited: 0,
+        vpage: Vec::new(),
+        leaf_dov: 0.0,
+    };
     let mut over_budget = false;
     match params.mode {
         Mode::Threshold | Mode::Vmsse => t.walk(0, 1.0, &ByVisibility)?,
@@ -129,6 +139,8 @@ struct Traversal<'a, 'db> {
     nodes_visited: u64,
     /// A reused buffer for V-pages.
     vpage: Vec<VEntry>,
+    /// The DoV of the leaf whose objects the walk is returning (the η rule's gate).
+    leaf_dov: f64,
 }
 
 impl Traversal<'_, '_> {
@@ -160,6 +172,9 @@ impl Traversal<'_, '_> {
             self.nodes_visited += 1;
             (self.access.node(id, 0.0)?, Vec::new())
         };
+        if page.node.is_leaf() {
+            self.leaf_dov = dov;
+        }
         for (k, e) in page.node.entries.iter().enumerate() {
             let (d, nvo) = v.get(k).map_or((0.0, 0), |ve| (f64::from(ve.dov), ve.nvo));
             if page.node.is_leaf() {
@@ -186,9 +201,11 @@ impl Traversal<'_, '_> {
         let scale = || f64::from(max_scale(&Mat4::from_cols_array(&self.db.catalog().objects[o as usize].transform)));
         match (self.params.mode, self.params.lod_rule) {
             (Mode::Vmsse, _) => self.coarsest_within_tau(chain, d, mbr, scale()).unwrap_or(0),
-            // The η rule: what is barely visible (DoV ≤ η) is drawn within the bound relaxed by
-            // visibility, as a stopped subtree is (`stop_at`).
-            (Mode::Threshold, LodRule::ScreenError { pixels }) if d <= self.params.eta => {
+            // The η rule: the objects of a barely visible leaf (DoV ≤ η) are drawn within the
+            // bound relaxed by their own visibility, as a stopped subtree is (`stop_at`). Gated by
+            // the leaf, not the object, so that a subtree is open or closed at every η alike and
+            // its stop never draws more than its descent did at a smaller η (decision 95).
+            (Mode::Threshold, LodRule::ScreenError { pixels }) if self.leaf_dov <= self.params.eta => {
                 let relaxed = self.relaxed_pixels(pixels, d, mbr);
                 self.coarsest_within_pixels(chain, mbr, scale(), relaxed).unwrap_or(0)
             }

@@ -1,9 +1,10 @@
-//! The fan-out table (issue "query engine"): for M ∈ {4, 8, 16, 32, 126}, the tree's nodes and
-//! height, each layout's bytes, and per η ∈ {0, 1e-4, 1e-3, 8e-3} the faces returned and pages
-//! read by threshold queries from every cell's centre (indexed-vertical), beside the naive
-//! method's pages. Databases are built once into `--cache DIR` and reused.
+//! The fan-out table (issue "query engine", re-checked for issue 18): for M ∈ {4, 8, 16, 32, 126},
+//! the tree's nodes and height, each layout's bytes, and per η ∈ {0, 1e-4, 1e-3, 1e-2, 3e-2} the
+//! faces, pages and items (draw calls) of the default query from every cell's centre
+//! (indexed-vertical, no camera), beside the naive method's at the same LOD rule. Databases are
+//! built once into `--cache DIR` and reused.
 //!
-//! `cargo run --release -p hdov-tools --bin fanout-table -- [--scale small|default|large] [--resolution R] [--cache DIR] [--csv FILE]`
+//! `cargo run --release -p hdov-tools --bin fanout-table -- [--scale small|default|large] [--resolution R] [--lod-rule RULE] [--cache DIR] [--csv FILE]`
 
 use std::path::PathBuf;
 
@@ -14,13 +15,14 @@ use hdov::progress::Progress;
 use hdov::{BuildParams, Database, LodRule, Mode, QueryParams, VisibilityParams};
 
 const FANOUTS: [u32; 5] = [4, 8, 16, 32, 126];
-const ETAS: [f64; 4] = [0.0, 1e-4, 1e-3, 8e-3];
+const ETAS: [f64; 5] = [0.0, 1e-4, 1e-3, 1e-2, 3e-2];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut scale = CityScale::Default;
     let mut resolution = 64;
     let mut cache = PathBuf::from("target/experiments");
     let mut csv: Option<PathBuf> = None;
+    let mut lod_rule = LodRule::default();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = || args.next().ok_or(format!("{a} needs a value"));
@@ -29,17 +31,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--resolution" => resolution = value()?.parse()?,
             "--cache" => cache = value()?.into(),
             "--csv" => csv = Some(value()?.into()),
+            "--lod-rule" => lod_rule = value()?.parse()?,
             _ => return Err(format!("unknown argument {a}").into()),
         }
     }
     let scene = hdov::city::generate(&CityParams { seed: 1, scale, ..Default::default() })?;
     let mut rows = vec![format!(
-        "M,nodes,height,horizontal_bytes,vertical_bytes,indexed_vertical_bytes,naive_pages,{}",
-        ETAS.iter().map(|e| format!("faces_eta_{e},pages_eta_{e},internal_lods_eta_{e}")).collect::<Vec<_>>().join(",")
+        "M,nodes,height,horizontal_bytes,vertical_bytes,indexed_vertical_bytes,naive_faces,naive_pages,naive_items,{}",
+        ETAS.iter()
+            .map(|e| format!("faces_eta_{e},pages_eta_{e},items_eta_{e},internal_lods_eta_{e}"))
+            .collect::<Vec<_>>()
+            .join(",")
     )];
     println!(
-        "| M | nodes | height | bytes h / v / iv | naive pages | {} |",
-        ETAS.map(|e| format!("η = {e}: faces, pages")).join(" | ")
+        "| M | nodes | height | bytes h / v / iv | naive: faces, pages, items | {} |",
+        ETAS.map(|e| format!("η = {e}: faces, pages, items")).join(" | ")
     );
     println!("|---|---|---|---|---|{}", "---|".repeat(ETAS.len()));
     for m in FANOUTS {
@@ -61,34 +67,40 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let grid = *db.grid().ok_or("no grid")?;
         let centres = grid.cell_centres();
         let n = centres.len() as f64;
-        let mean = |p: &QueryParams| -> Result<(f64, f64, f64), hdov::Error> {
-            let (mut faces, mut pages, mut nodes) = (0.0, 0.0, 0.0);
+        // Means of faces, pages, items and internal LODs over the cell centres.
+        let mean = |p: &QueryParams| -> Result<[f64; 4], hdov::Error> {
+            let mut sums = [0.0; 4];
             for &at in &centres {
                 let a = db.query(at, p)?;
-                faces += a.stats.faces as f64;
-                pages += a.stats.pages_read as f64;
-                nodes += a.items.iter().filter(|i| i.kind == hdov::ItemKind::Node).count() as f64;
+                sums[0] += a.stats.faces as f64;
+                sums[1] += a.stats.pages_read as f64;
+                sums[2] += a.items.len() as f64;
+                sums[3] += a.items.iter().filter(|i| i.kind == hdov::ItemKind::Node).count() as f64;
             }
-            Ok((faces / n, pages / n, nodes / n))
+            Ok(sums.map(|s| s / n))
         };
-        let naive = mean(&QueryParams { mode: Mode::Naive, lod_rule: LodRule::Dov, ..Default::default() })?;
+        let naive = mean(&QueryParams { mode: Mode::Naive, lod_rule, ..Default::default() })?;
         let per_eta: Vec<_> = ETAS
             .iter()
-            .map(|&eta| mean(&QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() }))
+            .map(|&eta| mean(&QueryParams { eta, lod_rule, ..Default::default() }))
             .collect::<Result<_, _>>()?;
         let bytes = hdov_storage::LayoutKind::ALL.map(|k| info.layouts.get(&k).map_or(0, |l| l.bytes));
         let (nodes, height) = (info.nodes, info.tree.height);
         println!(
-            "| {m} | {nodes} | {height} | {} | {:.1} | {} |",
+            "| {m} | {nodes} | {height} | {} | {:.0}, {:.1}, {:.1} | {} |",
             bytes.map(|b| b.to_string()).join(" / "),
-            naive.1,
-            per_eta.iter().map(|(f, p, _)| format!("{f:.0}, {p:.1}")).collect::<Vec<_>>().join(" | ")
+            naive[0],
+            naive[1],
+            naive[2],
+            per_eta.iter().map(|[f, p, i, _]| format!("{f:.0}, {p:.1}, {i:.1}")).collect::<Vec<_>>().join(" | ")
         );
         rows.push(format!(
-            "{m},{nodes},{height},{},{:.2},{}",
+            "{m},{nodes},{height},{},{:.1},{:.2},{:.2},{}",
             bytes.map(|b| b.to_string()).join(","),
-            naive.1,
-            per_eta.iter().map(|(f, p, i)| format!("{f:.1},{p:.2},{i:.2}")).collect::<Vec<_>>().join(",")
+            naive[0],
+            naive[1],
+            naive[2],
+            per_eta.iter().map(|[f, p, i, l]| format!("{f:.1},{p:.2},{i:.2},{l:.2}")).collect::<Vec<_>>().join(",")
         ));
     }
     if let Some(path) = csv {

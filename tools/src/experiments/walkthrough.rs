@@ -87,7 +87,7 @@ pub fn methods(camera: Camera) -> Vec<(&'static str, WalkMethod)> {
         ("VISUAL η = 0, LOD 0 (visibility alone)", visual(0.0, LodRule::ScreenError { pixels: 0.0 })),
         ("VISUAL η = 0", visual(0.0, screen)),
         (VISUAL_PICTURED, visual(1e-3, screen)),
-        ("VISUAL η = 8e-3", visual(8e-3, screen)),
+        ("VISUAL η = 3e-2 (default)", visual(hdov::query::DEFAULT_ETA, screen)),
         ("VISUAL η = 1e-3, 1 px", visual(1e-3, LodRule::ScreenError { pixels: 1.0 })),
         ("VISUAL η = 1e-3, eq. 5.6 levels (thesis)", visual(1e-3, LodRule::Dov)),
         (REVIEW_PICTURED, review(1.0, 200.0)),
