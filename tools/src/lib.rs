@@ -20,6 +20,7 @@ pub fn machine() -> String {
 }
 
 pub mod experiments;
+pub mod walk_loads;
 /// CPU time this process has used (all its threads), to the nanosecond: on a machine shared with
 /// other work, a single-threaded measurement's CPU time is far steadier than its wall clock.
 pub fn process_cpu_time() -> std::time::Duration {
