@@ -98,9 +98,10 @@ pub struct VisibilityArgs {
     resolution: u32,
     /// Sample points per cell: `corners` (the 8 shared corners), a number K of stratified
     /// interior points in addition to the corners, or `adaptive[:SEEDS:BUDGET]`: points where new
-    /// objects appear, at most BUDGET per cell, or `probe[:POINTS:RAYS]`: rays from POINTS points
-    /// of each cell towards the objects its neighbourhood sees, RAYS per point and object
-    /// (docs/dov.md).
+    /// objects appear, at most BUDGET per cell, or `probe[:POINTS:RAYS[:REGION]]`: rays from
+    /// POINTS points of each cell towards the objects its neighbourhood sees, RAYS per point and
+    /// object, and REGION rays from all over the cell in every direction, or `region`
+    /// (probe:32:4:24576: the fewest wrong pixels from anywhere in a cell; docs/dov.md).
     #[arg(long, default_value = "corners")]
     samples: Sampling,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
@@ -127,8 +128,9 @@ pub struct VisibilityArgs {
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
-    /// Default: box,neighbours; box alone with `--samples probe` (its rays check what the
-    /// neighbour test would guess).
+    /// Default: box,neighbours; box alone with `--samples probe` without region rays (its rays
+    /// check what the neighbour test would guess); with region rays the neighbours test also
+    /// takes what the neighbouring cells' region rays met.
     #[arg(long, value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
@@ -142,7 +144,7 @@ impl VisibilityArgs {
             return Ok(None);
         }
         let default_floor = match self.samples {
-            Sampling::Probe(_) => "box",
+            Sampling::Probe(p) if p.region == 0 => "box",
             _ => "box,neighbours",
         };
         let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();

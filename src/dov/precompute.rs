@@ -19,7 +19,7 @@ use std::collections::{HashMap, HashSet};
 use glam::Vec3;
 
 use super::adaptive::{AdaptiveSampling, sample_cell};
-use super::probe::{RayProbing, probe_cell};
+use super::probe::{RayProbing, probe_cell, region_finds};
 use super::sampling::{interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
@@ -169,6 +169,23 @@ pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usi
     out
 }
 
+/// How many rings of neighbouring cells' region finds are a cell's probe candidates.
+pub const REGION_RING: u32 = 8;
+
+/// The ids of the cells within `ring` cells of cell `c` (itself included), clipped to the grid.
+pub fn neighbourhood_cells(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usize> {
+    let range = |a: usize| c[a].saturating_sub(ring)..=(c[a] + ring).min(grid.dims[a] - 1);
+    let mut out = Vec::new();
+    for y in range(1) {
+        for z in range(2) {
+            for x in range(0) {
+                out.push(grid.cell_id([x, y, z]));
+            }
+        }
+    }
+    out
+}
+
 /// How many rings of neighbouring cells' corners give [`PrecomputeOptions::probe`] its candidates:
 /// on the audit scene two rings left 33 % fewer pairs unfound than one, three rings 16 % fewer
 /// again at 30 % more rays (docs/dov.md, "Ray probing").
@@ -249,6 +266,19 @@ pub fn precompute_shard(
         probe_rays: 0,
         footprint_rays: 0,
     };
+    // Region rays, for the shard's cells and their neighbours: what a cell's rays meet it sees,
+    // and its neighbours probe for (an object seen from part of a cell is the likeliest to be
+    // seen from part of the next, where that cell's own rays may have missed it).
+    let mut region: HashMap<usize, Vec<(u32, Vec3)>> = HashMap::new();
+    if let (Some(probing), Some(caster)) = (options.probe.filter(|p| p.region > 0), backend.ray_caster()) {
+        let mut ids: Vec<usize> = cells.clone().flat_map(|id| neighbourhood_cells(grid, grid.cell_coords(id), REGION_RING)).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        for id in ids {
+            region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), probing.region));
+            out.probe_rays += u64::from(probing.region);
+        }
+    }
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
@@ -285,20 +315,59 @@ pub fn precompute_shard(
             let mut candidates = seen_by(needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]));
             candidates
                 .extend((0..object_bounds.len() as u32).filter(|&o| object_bounds[o as usize].intersects(&cell_box)));
+            if probing.region > 0 {
+                // What the neighbours' region rays met, nearest cells first, as many as probing
+                // them would cost the cell's own region rays at most.
+                let cap = (probing.region / (probing.points * probing.rays).max(1)) as usize;
+                let mut ring_of: Vec<(u32, u32)> = neighbourhood_cells(grid, coords, REGION_RING)
+                    .into_iter()
+                    .filter(|&n| n != id)
+                    .flat_map(|n| {
+                        let c = grid.cell_coords(n);
+                        let ring = (0..3).map(|a| c[a].abs_diff(coords[a])).max().unwrap_or(0);
+                        region.get(&n).into_iter().flatten().map(move |f| (ring, f.0))
+                    })
+                    .filter(|&(_, o)| !seen.contains(&o) && !candidates.contains(&o))
+                    .collect();
+                ring_of.sort_unstable();
+                let mut taken = HashSet::new();
+                for (_, o) in ring_of {
+                    if taken.len() == cap {
+                        break;
+                    }
+                    taken.insert(o);
+                }
+                candidates.extend(taken);
+            }
             // probe_cell skips the seen ones.
             let mut candidates: Vec<u32> = candidates.into_iter().collect();
             candidates.sort_unstable();
-            let probe = probe_cell(caster, &cube, &cell_box, &seen, &candidates, object_bounds, probing);
+            let own = region.get(&id).map_or(&[][..], Vec::as_slice);
+            let probe = probe_cell(caster, &cube, &cell_box, &seen, &candidates, own, object_bounds, probing);
             out.probe_rays += probe.rays;
             out.footprint_rays += probe.footprint_rays;
             interior.extend(probe.points);
         }
         let points: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
+        // What the neighbouring cells' region rays met counts as seen nearby, as their corners'
+        // views do (the neighbours floor).
+        let region_around: Vec<PointDov> = neighbourhood_cells(grid, coords, 1)
+            .into_iter()
+            .filter(|&n| n != id)
+            .filter_map(|n| region.get(&n))
+            .map(|finds| PointDov {
+                resolution: cube.resolution(),
+                objects: finds.iter().map(|f| (f.0, 0.0)).collect(),
+                back_face: 0.0,
+                empty: 0.0,
+            })
+            .collect();
         let around: Vec<&PointDov> = if ring > 0 {
             neighbourhood_corners(grid, coords, 1)
                 .into_iter()
                 .filter(|c| !own.contains(c))
                 .map(|c| &corner_dov[&c])
+                .chain(&region_around)
                 .collect()
         } else {
             Vec::new()

@@ -20,7 +20,9 @@
 //!
 //! An object seen only through a gap narrower than the spacing of its targets, or only from
 //! places between the probe points, can still be missed: the audit in docs/dov.md measures how
-//! often against dense sampling.
+//! often against dense sampling. *Region rays* (`RayProbing::region`) close most of that: rays
+//! from all over the cell in every direction ([`region_finds`]); what they meet is seen, and what
+//! the neighbouring cells' region rays meet becomes a candidate here (`precompute`).
 
 use std::collections::HashMap;
 
@@ -28,7 +30,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
-use super::sampling::{halton_point, halton3};
+use super::sampling::{halton_point, halton3, region_ray};
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
 pub use crate::format::params::RayProbing;
 use crate::geom::Aabb;
@@ -170,13 +172,16 @@ pub struct CellProbe {
 }
 
 /// Probes the cell `cell` (see the module documentation). `seen`: the objects its measured points
-/// see (not probed); `candidates`: the objects to probe; `bounds`: every object's box.
+/// see (not probed); `candidates`: the objects to probe; `region`: what the cell's own region
+/// rays met ([`region_finds`]); `bounds`: every object's box.
+#[allow(clippy::too_many_arguments)]
 pub fn probe_cell(
     rays: &dyn RayCaster,
     cube: &CubeMap,
     cell: &Aabb,
     seen: &std::collections::HashSet<u32>,
     candidates: &[u32],
+    region: &[(u32, Vec3)],
     bounds: &[Aabb],
     probing: &RayProbing,
 ) -> CellProbe {
@@ -211,6 +216,12 @@ pub fn probe_cell(
     }
     found.sort_unstable();
     found.dedup_by_key(|f| f.0);
+    // What the region's rays met and nothing else found is seen from their origin.
+    let by_region: Vec<(u32, Vec3)> = region
+        .iter()
+        .copied()
+        .filter(|&(o, _)| !seen.contains(&o) && found.binary_search_by_key(&o, |f| f.0).is_err())
+        .collect();
     // A found object's DoV is taken at the point whose rays meet it most (the likeliest to see
     // most of it), on its footprint there.
     let measured: Vec<(usize, f64, u64, u64)> = found
@@ -240,6 +251,18 @@ pub fn probe_cell(
         footprint_rays += footprint;
         by_point.entry(i).or_default().push((object, dov));
     }
+    // A region find is measured at its ray's origin, which becomes a point of its own.
+    let measured_region: Vec<(u32, f64, u64)> = by_region
+        .par_iter()
+        .map(|&(object, origin)| {
+            let (dov, f) = footprint_dov(rays, cube, origin, object, &bounds[object as usize]);
+            (object, dov, f)
+        })
+        .collect();
+    for (k, (object, dov, footprint)) in measured_region.into_iter().enumerate() {
+        footprint_rays += footprint;
+        by_point.entry(points.len() + k).or_default().push((object, dov));
+    }
     let mut out: Vec<PointDov> = by_point
         .into_values()
         .map(|mut objects| {
@@ -249,6 +272,23 @@ pub fn probe_cell(
         .collect();
     out.sort_by_key(|p| p.objects[0].0);
     CellProbe { points: out, rays: cast, footprint_rays }
+}
+
+/// The objects that `count` region rays of `cell` ([`region_ray`]) meet first from the front,
+/// each once, with the origin of the first ray that met it, in object order. A ray from inside a
+/// closed mesh meets its back faces first and finds nothing.
+pub fn region_finds(rays: &dyn RayCaster, cell: &Aabb, count: u32) -> Vec<(u32, Vec3)> {
+    let mut met: Vec<(u32, u32, Vec3)> = (1..=count)
+        .into_par_iter()
+        .filter_map(|k| {
+            let (origin, dir) = region_ray(cell, k);
+            let id = rays.first_hit(origin, dir, f32::INFINITY);
+            (id != NO_OBJECT && id & BACK_FACE_BIT == 0).then_some((id, k, origin))
+        })
+        .collect();
+    met.sort_unstable_by_key(|m| (m.0, m.1));
+    met.dedup_by_key(|m| m.0);
+    met.into_iter().map(|(id, _, origin)| (id, origin)).collect()
 }
 
 /// The DoV of `object` from `p` on the cube map's texels whose centre ray enters its box `b`:

@@ -139,7 +139,9 @@ impl TryFrom<String> for AdaptiveSampling {
 }
 
 /// Parameters of ray probing: `points` probe points per cell, `rays` rays from each towards each
-/// unseen candidate. Written `probe:POINTS:RAYS` (`probe` alone is [`RayProbing::DEFAULT`]).
+/// unseen candidate, and optionally REGION rays from points spread over the cell in directions
+/// spread over the sphere. Written `probe:POINTS:RAYS[:REGION]` (`probe` alone is
+/// [`RayProbing::DEFAULT`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(into = "String", try_from = "String")]
 pub struct RayProbing {
@@ -147,34 +149,58 @@ pub struct RayProbing {
     pub points: u32,
     /// Rays from each probe point towards each unseen candidate.
     pub rays: u32,
+    /// Rays from the cell's region in spread directions, whatever they meet first being seen
+    /// (guided visibility sampling's random stage); 0: none.
+    pub region: u32,
 }
 
 impl RayProbing {
     /// Chosen by the audit in docs/dov.md ("Ray probing").
-    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4 };
+    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4, region: 0 };
 
-    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`.
-    pub fn new(points: u32, rays: u32) -> std::result::Result<Self, String> {
-        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) {
-            return Err(format!("probe:{points}:{rays}: need 1 ≤ POINTS ≤ 4096 and 1 ≤ RAYS ≤ 4096"));
+    /// `--samples region`: probing with 24,576 region rays per cell, the fewest that met issue
+    /// 22's wrong-pixel targets on every street scene (docs/dov.md, "Region rays").
+    pub const REGION: RayProbing = RayProbing { points: 32, rays: 4, region: 24576 };
+
+    /// Most region rays per cell.
+    pub const MAX_REGION: u32 = 1 << 24;
+
+    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`, `region ≤ 2^24`.
+    pub fn new(points: u32, rays: u32, region: u32) -> std::result::Result<Self, String> {
+        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) || region > Self::MAX_REGION {
+            return Err(format!(
+                "probe:{points}:{rays}:{region}: need 1 ≤ POINTS ≤ 4096, 1 ≤ RAYS ≤ 4096 and REGION ≤ {}",
+                Self::MAX_REGION
+            ));
         }
-        Ok(Self { points, rays })
+        Ok(Self { points, rays, region })
     }
 }
 
 impl std::fmt::Display for RayProbing {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "probe:{}:{}", self.points, self.rays)
+        write!(f, "probe:{}:{}", self.points, self.rays)?;
+        if self.region > 0 {
+            write!(f, ":{}", self.region)?;
+        }
+        Ok(())
     }
 }
 
 impl std::str::FromStr for RayProbing {
     type Err = String;
-    /// `probe` or `probe:POINTS:RAYS`.
+    /// `probe`, `probe:POINTS:RAYS` or `probe:POINTS:RAYS:REGION`.
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match parse_two_counts(s, "probe", "POINTS:RAYS")? {
+        let (two, region) = match s.rsplit_once(':') {
+            Some((head, last)) if head.matches(':').count() == 2 => {
+                let region = last.trim().parse::<u32>().map_err(|_| format!("'{s}': '{last}' is not a count"))?;
+                (head, region)
+            }
+            _ => (s, 0),
+        };
+        match parse_two_counts(two, "probe", "POINTS:RAYS[:REGION]")? {
             None => Ok(Self::DEFAULT),
-            Some((points, rays)) => Self::new(points, rays),
+            Some((points, rays)) => Self::new(points, rays, region),
         }
     }
 }
@@ -444,7 +470,8 @@ impl std::fmt::Display for Sampling {
 
 impl std::str::FromStr for Sampling {
     type Err = String;
-    /// `corners`, a count of interior points, `adaptive[:SEEDS:BUDGET]` or `probe[:POINTS:RAYS]`.
+    /// `corners`, a count of interior points, `adaptive[:SEEDS:BUDGET]`,
+    /// `probe[:POINTS:RAYS[:REGION]]` or `region` ([`RayProbing::REGION`]).
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         if s == "corners" {
             return Ok(Sampling::Interior(0));
@@ -455,9 +482,12 @@ impl std::str::FromStr for Sampling {
         if s.starts_with("probe") {
             return s.parse().map(Sampling::Probe);
         }
+        if s == "region" {
+            return Ok(Sampling::Probe(RayProbing::REGION));
+        }
         s.parse().map(Sampling::Interior).map_err(|_| {
             format!(
-                "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET] nor probe[:POINTS:RAYS]"
+                "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET], probe[:POINTS:RAYS[:REGION]] nor region"
             )
         })
     }
@@ -701,9 +731,13 @@ mod tests {
         assert_eq!(v["adaptive"], "adaptive:3:24");
         assert_eq!(v["interior_samples"], 0);
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
-        let p = with(Sampling::Probe(RayProbing { points: 16, rays: 2 }));
+        let p = with(Sampling::Probe(RayProbing { points: 16, rays: 2, region: 0 }));
         let json = serde_json::to_value(&p).unwrap();
         assert_eq!(json["visibility"]["probe"], "probe:16:2");
+        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+        let p = with(Sampling::Probe(RayProbing { points: 32, rays: 4, region: 32768 }));
+        let json = serde_json::to_value(&p).unwrap();
+        assert_eq!(json["visibility"]["probe"], "probe:32:4:32768");
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
         let p = with(Sampling::Interior(5));
         let json = serde_json::to_value(&p).unwrap();
@@ -721,11 +755,16 @@ mod tests {
 
     #[test]
     fn sampling_names_round_trip() {
-        for s in ["corners", "7", "adaptive:2:16", "probe:32:4"] {
+        for s in ["corners", "7", "adaptive:2:16", "probe:32:4", "probe:32:4:32768"] {
             assert_eq!(s.parse::<Sampling>().unwrap().to_string(), s);
         }
         assert_eq!("adaptive".parse::<Sampling>().unwrap(), Sampling::Adaptive(AdaptiveSampling::DEFAULT));
+        assert_eq!("probe:32:4:0".parse::<Sampling>().unwrap().to_string(), "probe:32:4");
+        assert_eq!("region".parse::<Sampling>().unwrap().to_string(), "probe:32:4:24576");
         assert!("halton".parse::<Sampling>().is_err());
+        for bad in ["probe:32:4:many", "probe:32:4:-1", "probe:32:4:16777217", "probe:32:4:5:6", "probe:32"] {
+            assert!(bad.parse::<Sampling>().is_err(), "{bad}");
+        }
     }
 
     #[test]

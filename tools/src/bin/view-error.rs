@@ -146,7 +146,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (k, name) in samplers.iter().enumerate() {
         let sampling: Sampling = name.parse()?;
         let floors = match sampling {
-            Sampling::Probe(_) => vec![FloorTest::BoxWithin(0.0)],
+            Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
             _ => vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
         };
         let visibility = VisibilityParams {
