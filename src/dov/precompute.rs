@@ -19,7 +19,7 @@ use std::collections::{HashMap, HashSet};
 use glam::Vec3;
 
 use super::adaptive::{AdaptiveSampling, sample_cell};
-use super::probe::{RayProbing, probe_cell, region_finds};
+use super::probe::{Leads, RayProbing, probe_cell, region_finds};
 use super::sampling::{interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
@@ -343,7 +343,8 @@ pub fn precompute_shard(
             let mut candidates: Vec<u32> = candidates.into_iter().collect();
             candidates.sort_unstable();
             let own = region.get(&id).map_or(&[][..], Vec::as_slice);
-            let probe = probe_cell(caster, &cube, &cell_box, &seen, &candidates, own, object_bounds, probing);
+            let leads = Leads { seen: &seen, candidates: &candidates, region: own };
+            let probe = probe_cell(caster, &cube, &cell_box, &leads, object_bounds, probing);
             out.probe_rays += probe.rays;
             out.footprint_rays += probe.footprint_rays;
             interior.extend(probe.points);

@@ -171,20 +171,27 @@ pub struct CellProbe {
     pub footprint_rays: u64,
 }
 
-/// Probes the cell `cell` (see the module documentation). `seen`: the objects its measured points
-/// see (not probed); `candidates`: the objects to probe; `region`: what the cell's own region
-/// rays met ([`region_finds`]); `bounds`: every object's box.
-#[allow(clippy::too_many_arguments)]
+/// What a cell's probing starts from.
+pub struct Leads<'a> {
+    /// The objects its measured points see (not probed).
+    pub seen: &'a std::collections::HashSet<u32>,
+    /// The objects to probe.
+    pub candidates: &'a [u32],
+    /// What the cell's own region rays met ([`region_finds`]).
+    pub region: &'a [(u32, Vec3)],
+}
+
+/// Probes the cell `cell` (see the module documentation) from `leads`; `bounds`: every object's
+/// box.
 pub fn probe_cell(
     rays: &dyn RayCaster,
     cube: &CubeMap,
     cell: &Aabb,
-    seen: &std::collections::HashSet<u32>,
-    candidates: &[u32],
-    region: &[(u32, Vec3)],
+    leads: &Leads,
     bounds: &[Aabb],
     probing: &RayProbing,
 ) -> CellProbe {
+    let Leads { seen, candidates, region } = *leads;
     let points: Vec<Vec3> = (1..=probing.points).map(|k| halton_point(cell, k)).collect();
     let outside: Vec<bool> = points.par_iter().map(|&p| !is_inside(rays, p)).collect();
     let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize };
