@@ -57,8 +57,8 @@ macro_rules! internal_modules {
 }
 
 internal_modules!(
-    build, camera, db, dov, error, export, format, geom, gfx, grid, lod, overwrite, progress, query, record, rtree,
-    scene
+    build, camera, db, dov, error, export, format, geom, gfx, grid, lod, overwrite, progress, query, record, rng,
+    rtree, scene
 );
 
 pub mod city;

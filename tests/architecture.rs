@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 /// Layers, bottom first: a module may import the modules of lower layers only (not those of its
 /// own layer, nor above). The same table is drawn in docs/architecture.md.
 const LAYERS: &[&[&str]] = &[
-    &["error", "geom", "overwrite", "progress"],
+    &["error", "geom", "overwrite", "progress", "rng"],
     &["record", "grid", "camera", "rtree"],
     &["scene"],
     &["format", "city", "gfx"],

@@ -8,7 +8,7 @@
 use glam::Vec2;
 
 use super::builder::{MeshBuilder, Rect, Tier, Windows};
-use super::rng::Rng;
+use crate::rng::Rng;
 use crate::scene::Mesh;
 
 /// Fewest triangles a building may have.

@@ -10,7 +10,7 @@ use glam::Vec2;
 
 use super::builder::Rect;
 use super::building::BuildingKind;
-use super::rng::Rng;
+use crate::rng::Rng;
 
 /// Independent random streams, so that e.g. changing the lot splitter leaves street widths as
 /// they were.

@@ -34,7 +34,6 @@ mod builder;
 mod building;
 mod detail;
 mod layout;
-mod rng;
 
 use std::fmt;
 use std::str::FromStr;
@@ -48,9 +47,9 @@ pub use detail::{DETAIL_HEIGHT, DETAIL_MAX_WIDTH, normalise_detail, procedural_d
 use crate::error::{Error, Param};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
+use crate::rng::Rng;
 use crate::scene::{BaseMesh, Mesh, Object, Scene};
 use layout::CityPlan;
-use rng::Rng;
 
 /// Random stream of the buildings' designs (apart from the layout's streams).
 const BUILDING_STREAM: u64 = 100;

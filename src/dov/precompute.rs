@@ -156,13 +156,17 @@ impl PrecomputeOptions {
 /// The corner ids of the cells within `ring` cells of cell `c` (ring 1: the 4 × 4 × 4 block of
 /// its own 8 corners and those of its 26 neighbours; ring 0: its own 8), clipped to the grid.
 pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usize> {
-    let range = |a: usize| c[a].saturating_sub(ring)..=(c[a] + 1 + ring).min(grid.dims[a]);
-    let side = 2 * ring as usize + 2;
-    let mut out = Vec::with_capacity(side * side * side);
+    block(|a| c[a].saturating_sub(ring)..=(c[a] + 1 + ring).min(grid.dims[a]), |p| grid.corner_id(p))
+}
+
+/// The ids `id` gives the lattice points of the box whose range along each axis is `range(axis)`,
+/// x fastest, then z, then y.
+fn block(range: impl Fn(usize) -> std::ops::RangeInclusive<u32>, id: impl Fn([u32; 3]) -> usize) -> Vec<usize> {
+    let mut out = Vec::new();
     for y in range(1) {
         for z in range(2) {
             for x in range(0) {
-                out.push(grid.corner_id([x, y, z]));
+                out.push(id([x, y, z]));
             }
         }
     }
@@ -174,16 +178,7 @@ pub const REGION_RING: u32 = 8;
 
 /// The ids of the cells within `ring` cells of cell `c` (itself included), clipped to the grid.
 pub fn neighbourhood_cells(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usize> {
-    let range = |a: usize| c[a].saturating_sub(ring)..=(c[a] + ring).min(grid.dims[a] - 1);
-    let mut out = Vec::new();
-    for y in range(1) {
-        for z in range(2) {
-            for x in range(0) {
-                out.push(grid.cell_id([x, y, z]));
-            }
-        }
-    }
-    out
+    block(|a| c[a].saturating_sub(ring)..=(c[a] + ring).min(grid.dims[a] - 1), |p| grid.cell_id(p))
 }
 
 /// How many rings of neighbouring cells' corners give [`PrecomputeOptions::probe`] its candidates:

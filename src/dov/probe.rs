@@ -30,7 +30,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
-use super::sampling::{halton_point, halton3, region_ray};
+use super::sampling::{RegionRays, halton_point, halton3};
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
 pub use crate::format::params::RayProbing;
 use crate::geom::Aabb;
@@ -281,14 +281,15 @@ pub fn probe_cell(
     CellProbe { points: out, rays: cast, footprint_rays }
 }
 
-/// The objects that `count` region rays of `cell` ([`region_ray`]) meet first from the front,
+/// The objects that `count` region rays of `cell` ([`RegionRays`]) meet first from the front,
 /// each once, with the origin of the first ray that met it, in object order. A ray from inside a
 /// closed mesh meets its back faces first and finds nothing.
 pub fn region_finds(rays: &dyn RayCaster, cell: &Aabb, count: u32) -> Vec<(u32, Vec3)> {
+    let region = RegionRays::new(cell);
     let mut met: Vec<(u32, u32, Vec3)> = (1..=count)
         .into_par_iter()
         .filter_map(|k| {
-            let (origin, dir) = region_ray(cell, k);
+            let (origin, dir) = region.ray(k);
             let id = rays.first_hit(origin, dir, f32::INFINITY);
             (id != NO_OBJECT && id & BACK_FACE_BIT == 0).then_some((id, k, origin))
         })

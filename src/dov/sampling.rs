@@ -9,6 +9,7 @@ use glam::Vec3;
 
 use super::PointDov;
 use crate::geom::Aabb;
+use crate::rng::Rng;
 
 /// `k` written in `base` and mirrored about the point: the Halton sequence's coordinate in
 /// that base, in [0, 1).
@@ -27,34 +28,35 @@ pub fn halton3(k: u32) -> Vec3 {
     Vec3::new(radical_inverse(k, 2), radical_inverse(k, 3), radical_inverse(k, 5))
 }
 
-/// The `k`-th (k ≥ 1) ray of a cell's region sampling: a point of the Halton sequence in bases
-/// 2, 3, 5, 7, 11, its first three coordinates the origin in the cell and the last two its
-/// direction, uniform on the sphere, so that origins and directions together spread evenly over
-/// the cell's rays. Each cell shifts the sequence by its own offset (a Cranley–Patterson
-/// rotation, from the cell box's bits): neighbouring cells then cast different rays, not the same
-/// pattern moved by a cell, and what one misses another may meet.
-pub fn region_ray(cell: &Aabb, k: u32) -> (Vec3, Vec3) {
-    let shift = cell_shift(cell);
-    let u = |i: usize, base: u32| (radical_inverse(k, base) + shift[i]).fract();
-    let origin = cell.min + Vec3::new(u(0, 2), u(1, 3), u(2, 5)) * cell.extent();
-    let z = 1.0 - 2.0 * u(3, 7);
-    let phi = std::f32::consts::TAU * u(4, 11);
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    (origin, Vec3::new(r * phi.cos(), z, r * phi.sin()))
+/// A cell's region rays: points of the Halton sequence in bases 2, 3, 5, 7, 11, the first three
+/// coordinates a ray's origin in the cell and the last two its direction, uniform on the sphere,
+/// so that origins and directions together spread evenly over the cell's rays. Each cell shifts
+/// the sequence by its own offset (a Cranley–Patterson rotation, seeded by the cell box's bits):
+/// neighbouring cells then cast different rays, not the same pattern moved by a cell, and what
+/// one misses another may meet.
+pub struct RegionRays {
+    cell: Aabb,
+    shift: [f32; 5],
 }
 
-/// Five numbers in [0, 1) that depend only on `cell`'s corners (splitmix64 over their bits).
-fn cell_shift(cell: &Aabb) -> [f32; 5] {
-    let mut h = cell.min.to_array().iter().chain(&cell.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
-        (h ^ u64::from(c.to_bits())).wrapping_mul(0xbf58_476d_1ce4_e5b9)
-    });
-    std::array::from_fn(|_| {
-        h = h.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = h;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    })
+impl RegionRays {
+    pub fn new(cell: &Aabb) -> Self {
+        let seed = cell.min.to_array().iter().chain(&cell.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
+            (h ^ u64::from(c.to_bits())).wrapping_mul(0xbf58_476d_1ce4_e5b9)
+        });
+        let mut rng = Rng::new(seed);
+        Self { cell: *cell, shift: std::array::from_fn(|_| rng.unit()) }
+    }
+
+    /// The `k`-th (k ≥ 1) ray: its origin and unit direction.
+    pub fn ray(&self, k: u32) -> (Vec3, Vec3) {
+        let u = |i: usize, base: u32| (radical_inverse(k, base) + self.shift[i]).fract();
+        let origin = self.cell.min + Vec3::new(u(0, 2), u(1, 3), u(2, 5)) * self.cell.extent();
+        let z = 1.0 - 2.0 * u(3, 7);
+        let phi = std::f32::consts::TAU * u(4, 11);
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        (origin, Vec3::new(r * phi.cos(), z, r * phi.sin()))
+    }
 }
 
 /// The `k`-th Halton point of `cell` (k ≥ 1): the same relative position in every cell.

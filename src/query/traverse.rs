@@ -37,17 +37,7 @@ pub(super) fn run(
     params: &QueryParams,
     cull: bool,
 ) -> Result<Found> {
-    let mut t = Traversal {
-        db,
-        access,
-        at,
-        cell_box,
-        params,
-        items: Vec::new(),
-        nodes_visited: 0,
-        vpage: Vec::new(),
-        leaf_dov: 0.0,
-    };
+    let mut t = Traversal { db, access, at, cell_box, params, items: Vec::new(), nodes_visited: 0, vpage: Vec::new() };
     let mut over_budget = false;
     match params.mode {
         Mode::Threshold | Mode::Vmsse => t.walk(0, 1.0, &ByVisibility)?,
@@ -82,8 +72,9 @@ trait Selection {
     /// and a node hidden there is not entered. Without, every entry's DoV is 0.
     fn reads_visibility(&self) -> bool;
 
-    /// The level at which to return object `o` (an entry of a leaf, DoV `d`), or `None` to skip it.
-    fn object(&self, t: &Traversal, o: u32, d: f64, mbr: &Aabb) -> Option<usize>;
+    /// The level at which to return object `o` (an entry of a leaf seen with DoV `leaf`; its own
+    /// DoV `d`), or `None` to skip it.
+    fn object(&self, t: &Traversal, o: u32, d: f64, leaf: f64, mbr: &Aabb) -> Option<usize>;
 
     /// What to do with child node `c` (DoV `d`, `nvo` visible objects).
     fn node(&self, t: &Traversal, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Choice;
@@ -99,8 +90,8 @@ impl Selection for ByVisibility {
         true
     }
 
-    fn object(&self, t: &Traversal, o: u32, d: f64, mbr: &Aabb) -> Option<usize> {
-        (d > 0.0).then(|| t.leaf_level(o, d, mbr))
+    fn object(&self, t: &Traversal, o: u32, d: f64, leaf: f64, mbr: &Aabb) -> Option<usize> {
+        (d > 0.0).then(|| t.leaf_level(o, d, leaf, mbr))
     }
 
     fn node(&self, t: &Traversal, c: u32, d: f64, nvo: u32, mbr: &Aabb) -> Choice {
@@ -120,7 +111,7 @@ impl Selection for InFrustum {
         false
     }
 
-    fn object(&self, _: &Traversal, _: u32, _: f64, mbr: &Aabb) -> Option<usize> {
+    fn object(&self, _: &Traversal, _: u32, _: f64, _: f64, mbr: &Aabb) -> Option<usize> {
         self.0.is_none_or(|f| f.meets(mbr)).then_some(0)
     }
 
@@ -139,8 +130,6 @@ struct Traversal<'a, 'db> {
     nodes_visited: u64,
     /// A reused buffer for V-pages.
     vpage: Vec<VEntry>,
-    /// The DoV of the leaf whose objects the walk is returning (the η rule's gate).
-    leaf_dov: f64,
 }
 
 impl Traversal<'_, '_> {
@@ -172,13 +161,10 @@ impl Traversal<'_, '_> {
             self.nodes_visited += 1;
             (self.access.node(id, 0.0)?, Vec::new())
         };
-        if page.node.is_leaf() {
-            self.leaf_dov = dov;
-        }
         for (k, e) in page.node.entries.iter().enumerate() {
             let (d, nvo) = v.get(k).map_or((0.0, 0), |ve| (f64::from(ve.dov), ve.nvo));
             if page.node.is_leaf() {
-                if let Some(lod) = sel.object(self, e.child, d, &e.mbr) {
+                if let Some(lod) = sel.object(self, e.child, d, dov, &e.mbr) {
                     self.push_object(e.child, lod, d, e.mbr);
                 }
                 continue;
@@ -195,8 +181,9 @@ impl Traversal<'_, '_> {
         Ok(())
     }
 
-    /// The level to draw object `o` at, seen with DoV `d` (every mode but frustum).
-    fn leaf_level(&self, o: u32, d: f64, mbr: &Aabb) -> usize {
+    /// The level to draw object `o` at, seen with DoV `d` in a leaf seen with DoV `leaf` (every
+    /// mode but frustum).
+    fn leaf_level(&self, o: u32, d: f64, leaf: f64, mbr: &Aabb) -> usize {
         let chain = self.db.catalog().object_lods(o);
         let scale = || f64::from(max_scale(&Mat4::from_cols_array(&self.db.catalog().objects[o as usize].transform)));
         match (self.params.mode, self.params.lod_rule) {
@@ -205,7 +192,7 @@ impl Traversal<'_, '_> {
             // bound relaxed by their own visibility, as a stopped subtree is (`stop_at`). Gated by
             // the leaf, not the object, so that a subtree is open or closed at every η alike and
             // its stop never draws more than its descent did at a smaller η (decision 95).
-            (Mode::Threshold, LodRule::ScreenError { pixels }) if self.leaf_dov <= self.params.eta => {
+            (Mode::Threshold, LodRule::ScreenError { pixels }) if leaf <= self.params.eta => {
                 let relaxed = self.relaxed_pixels(pixels, d, mbr);
                 self.coarsest_within_pixels(chain, mbr, scale(), relaxed).unwrap_or(0)
             }
@@ -354,7 +341,7 @@ impl Traversal<'_, '_> {
             rest -= d;
             let spent = if page.node.is_leaf() {
                 let chain = self.db.catalog().object_lods(e.child);
-                let (lod, _) = fit(chain, share, self.leaf_level(e.child, d, &e.mbr));
+                let (lod, _) = fit(chain, share, self.leaf_level(e.child, d, dov, &e.mbr));
                 self.push_object(e.child, lod, d, e.mbr);
                 u64::from(chain[lod].faces)
             } else {

@@ -19,6 +19,10 @@ pub fn machine() -> String {
     format!("Machine: {model}, {cores} cores (nproc), {mem_gib} GiB memory, load average {load} at start.")
 }
 
+/// η of the hierarchy's sweeps (`hierarchy-table`, `hierarchy-chart`): issue 18's, and the
+/// default η.
+pub const HIERARCHY_ETAS: [f64; 6] = [0.0, 1e-4, 1e-3, 4e-3, 1e-2, 3e-2];
+
 pub mod experiments;
 pub mod walk_loads;
 /// CPU time this process has used (all its threads), to the nanosecond: on a machine shared with

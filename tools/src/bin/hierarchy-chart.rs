@@ -42,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     // (curve, its parameter, session, REVIEW's parameters)
     let mut methods: Vec<(&str, f64, SessionParams, Option<ReviewParams>)> = Vec::new();
-    for eta in [0.0, 1e-4, 1e-3, 4e-3, 1e-2, 3e-2] {
+    for eta in hdov_tools::HIERARCHY_ETAS {
         methods.push(("default (η)", eta, visual(QueryParams { eta, ..Default::default() }), None));
         let dov = QueryParams { eta, lod_rule: LodRule::Dov, ..Default::default() };
         methods.push(("--lod-rule dov (η)", eta, visual(dov), None));

@@ -14,6 +14,7 @@ use std::path::PathBuf;
 use glam::Vec3;
 use hdov::render::{ColorMode, Renderer, View, fidelity};
 use hdov::{Database, ItemKind, LodRule, Mode, QueryParams};
+use hdov_tools::HIERARCHY_ETAS as ETAS;
 use hdov_tools::experiments::sequence_psnr;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -42,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let configs: Vec<(String, QueryParams)> = {
         let mut c = Vec::new();
-        for eta in [0.0, 1e-4, 1e-3, 4e-3, 1e-2, 3e-2] {
+        for eta in ETAS {
             c.push((format!("default, η = {eta:e}"), QueryParams { eta, ..Default::default() }));
         }
         for eta in [1e-3, 8e-3] {
@@ -88,8 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|&at| db.query(at, &QueryParams { mode: Mode::Naive, ..Default::default() }).map(|a| a.stats.pages_read))
         .collect::<hdov::Result<_>>()?;
-    let etas = [0.0, 1e-4, 1e-3, 4e-3, 1e-2, 3e-2];
-    let per_eta: Vec<Vec<(u64, u64)>> = etas
+    let per_eta: Vec<Vec<(u64, u64)>> = ETAS
         .iter()
         .map(|&eta| {
             centres
@@ -101,7 +101,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .collect::<hdov::Result<Vec<_>>>()
         })
         .collect::<hdov::Result<_>>()?;
-    for (eta, answers) in etas.iter().zip(&per_eta).skip(1) {
+    for (eta, answers) in ETAS.iter().zip(&per_eta).skip(1) {
         let over = answers.iter().zip(&naive_pages).filter(|((pages, _), naive)| pages > naive).count();
         let sum: u64 = answers.iter().map(|a| a.0).sum();
         let share = 100.0 * sum as f64 / naive_pages.iter().sum::<u64>().max(1) as f64;
@@ -121,8 +121,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     println!(
-        "from one η of {etas:?} to the next, in {} (cell, η step) pairs: pages grew in {pages_grew}, faces in {faces_grew} (by at most {:.1} %)",
-        centres.len() * (etas.len() - 1),
+        "from one η of {ETAS:?} to the next, in {} (cell, η step) pairs: pages grew in {pages_grew}, faces in {faces_grew} (by at most {:.1} %)",
+        centres.len() * (ETAS.len() - 1),
         100.0 * (worst - 1.0)
     );
     Ok(())

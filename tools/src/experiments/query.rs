@@ -1,9 +1,9 @@
 //! Item 3, thesis figs. 5.21–5.22: query time and I/O against η per layout and for the naive
 //! method, light-weight (tree, V-index, V-page pages) and heavy-weight (LOD geometry bytes the
 //! answer needs) apart, under the default LOD rule (issue 18: the figures with the default query;
-//! item 7 has the thesis's eq. 5.6 levels beside it). Item 7: faces, pages and query time against image fidelity (PSNR of the
-//! answer drawn against full detail) across η, for the η rule, the visibility-modulated error
-//! rule and polygon budgets, on one chart.
+//! item 7 has the thesis's eq. 5.6 levels beside it). Item 7: faces, pages and query time against
+//! image fidelity (PSNR of the answer drawn against full detail) across η, for the η rule, the
+//! visibility-modulated error rule and polygon budgets, on one chart.
 
 use glam::Vec3;
 use hdov::query::{Camera, LodRule};
@@ -14,8 +14,8 @@ use hdov_storage::LayoutKind;
 use super::charts::{Panel, Series};
 use super::{Csv, Ctx, Result, err, mean, sequence_psnr};
 
-/// η of the sweeps: 0 (the naive answer) to 8e-3, as the thesis's figs. 5.21–5.22, and on past
-/// the default η (1e-2) to where the default rule stops changing.
+/// η of the sweeps: 0 (the naive answer) to 8e-3, as the thesis's figs. 5.21–5.22, and on to
+/// the default η (3e-2), where the default rule stops changing.
 pub const ETAS: [f64; 11] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 2e-3, 4e-3, 8e-3, 1e-2, 3e-2];
 
 /// Bytes of LOD geometry an answer draws: the heavy-weight I/O a viewer without a cache pays.

@@ -1,8 +1,8 @@
 //! A small deterministic pseudo-random generator (SplitMix64).
 //!
-//! The city must be identical bit for bit for a seed on every platform and thread count, so the
-//! generator is written here rather than taken from a crate whose stream may change between
-//! versions. Every building draws from its own generator, seeded from the city seed and the
+//! The city must be identical bit for bit for a seed on every platform and thread count (and a
+//! build's region rays for a cell, `dov::sampling`), so the generator is written here rather than
+//! taken from a crate whose stream may change between versions. Every building draws from its own generator, seeded from the city seed and the
 //! building's index ([`Rng::derive`]), so parallel generation cannot change the result.
 
 /// SplitMix64: 64 bits of state, full period, good enough statistics for procedural geometry.
