@@ -172,11 +172,23 @@ for _ in $(seq 100); do
   [ "$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%T %r' 2>/dev/null)" = "PENDING BeginTime" ] && break
   sleep 0.1
 done
+# Release it only once the cancelled run's step daemon on the node has gone: a restart while
+# slurmd is still tearing the old run down is killed ("Job credential revoked") and fails.
+RAW=$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%A')
+for _ in $(seq 300); do
+  pgrep -f "slurmstepd: \[$RAW\." >/dev/null || break
+  sleep 0.1
+done
+! pgrep -f "slurmstepd: \[$RAW\." >/dev/null || fail "the cancelled run of task $VICTIM did not end"
 scontrol update JobId="${ARRAY}_${VICTIM}" StartTime=now || fail "could not release the requeued task"
 echo "slurm: task $VICTIM cancelled while running and requeued"
 
 for i in $(seq 3000); do
   [ -z "$(squeue -h -j "$BASE,$ARRAY,$MERGE" 2>/dev/null)" ] && break
+  # A job that failed leaves the merge waiting for ever: say so now, not after ten minutes.
+  if squeue -h -j "$MERGE" -o '%r' 2>/dev/null | grep -q DependencyNeverSatisfied; then
+    fail "a base or shard job failed: $(scontrol show job "$ARRAY" | grep -E 'ArrayTaskId|JobState' | tr -s ' ' | tr '\n' ' ')"
+  fi
   [ -n "${HDOV_SLURM_DEBUG:-}" ] && [ $((i % 25)) -eq 0 ] && squeue -h -o '%i %T %r %S' | tr '\n' ';' && echo
   sleep 0.2
 done
