@@ -54,8 +54,17 @@ pub struct ServeCmd {
 /// What every request shares: the database and the set of stored levels a URL may name.
 struct Served {
     db: Database,
-    /// Record offset → (level, stored crc32).
-    lods: HashMap<u64, (LodRef, u32)>,
+    /// Record offset → the stored level.
+    lods: HashMap<u64, ServedLod>,
+}
+
+/// A stored level as the routes name it: written once at start, not per item of every answer.
+struct ServedLod {
+    lod: LodRef,
+    /// The record's stored crc32.
+    crc: u32,
+    /// `/mesh/{offset}-{crc}.glb`.
+    url: String,
 }
 
 pub fn serve(a: ServeCmd) -> hdov::Result<()> {
@@ -65,7 +74,8 @@ pub fn serve(a: ServeCmd) -> hdov::Result<()> {
     }
     let mut lods = HashMap::new();
     for r in db.lod_refs() {
-        lods.insert(r.offset, (*r, db.lod_checksum(r)?));
+        let crc = db.lod_checksum(r)?;
+        lods.insert(r.offset, ServedLod { lod: *r, crc, url: format!("/mesh/{}-{crc:08x}.glb", r.offset) });
     }
     let served = Arc::new(Served { db, lods });
     // Database work is CPU-bound and short: threads beyond the cores only add memory (a heap
@@ -301,18 +311,18 @@ struct ServedAnswer<'a> {
 struct ServedItem<'a> {
     #[serde(flatten)]
     item: &'a Item,
-    mesh: String,
+    mesh: &'a str,
     #[serde(skip_serializing_if = "Option::is_none")]
     transform: Option<[f32; 16]>,
 }
 
 impl<'a> ServedItem<'a> {
-    fn of(s: &Served, item: &'a Item) -> ServedItem<'a> {
-        let crc = s.lods.get(&item.lod_ref.offset).map_or(0, |&(_, crc)| crc);
+    fn of(s: &'a Served, item: &'a Item) -> ServedItem<'a> {
         let m = s.db.item_transform(item);
         ServedItem {
             item,
-            mesh: format!("/mesh/{}-{crc:08x}.glb", item.lod_ref.offset),
+            // Every item's level is a stored one (the catalog's, as the map is).
+            mesh: s.lods.get(&item.lod_ref.offset).map_or("", |l| l.url.as_str()),
             transform: (m != glam::Mat4::IDENTITY).then(|| m.to_cols_array()),
         }
     }
@@ -322,7 +332,9 @@ impl<'a> ServedItem<'a> {
 /// its shortest decimal, as `--json` writes it (a `serde_json::Value` would widen it to f64's
 /// digits).
 fn json_response(value: &impl Serialize) -> Response {
-    let body = serde_json::to_vec(value).expect("serialisable");
+    // An answer of 150 items is about 55 KB: growing the buffer from empty copied it 4 times.
+    let mut body = Vec::with_capacity(64 << 10);
+    serde_json::to_writer(&mut body, value).expect("serialisable");
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
@@ -426,7 +438,7 @@ async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: H
     // `{offset}-{crc}.glb`, in exactly the form /query writes it.
     let (offset, crc) = name.strip_suffix(".glb").and_then(|n| n.split_once('-')).ok_or_else(unknown)?;
     let offset: u64 = offset.parse().ok().filter(|o: &u64| o.to_string() == offset).ok_or_else(unknown)?;
-    let &(lod, stored) = s.lods.get(&offset).ok_or_else(unknown)?;
+    let (lod, stored) = s.lods.get(&offset).map(|l| (l.lod, l.crc)).ok_or_else(unknown)?;
     if crc != format!("{stored:08x}") {
         return Err(unknown());
     }
