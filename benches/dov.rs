@@ -1,5 +1,7 @@
 //! DoV measurement speed: sample points per second for both backends, rays per second per thread
-//! for the CPU backend, on a generated block of 20 × 20 buildings (`hdov_testkit::scenes`).
+//! for the CPU backend, on a generated block of 20 × 20 buildings (`hdov_testkit::scenes`); and
+//! on the audit block of the from-region samplers, region rays per second per thread beside a
+//! corner cube map's (what `--samples region` adds to `corners`, per ray).
 //!
 //! `cargo bench --bench dov` (short default run: 10 samples per benchmark).
 
@@ -57,6 +59,33 @@ fn dov_benches(c: &mut Criterion) {
         b.iter(|| {
             k = (k + 1) % points.len();
             pool.install(|| cpu.render_ids(points[k], &mut ids).unwrap())
+        })
+    });
+    group.finish();
+
+    // Region rays (one cell's 24,576, `--samples region`) against cube-map rays at R = 128, the
+    // build's resolution, on one thread, over the audit block's cells.
+    let (scene, grid) = hdov_testkit::scenes::audit_block();
+    let r = 128;
+    let mut cpu = CpuBackend::new(&scene, r).unwrap();
+    let cells: Vec<_> = (0..grid.cell_count()).step_by(7).map(|id| grid.cell_box(grid.cell_coords(id))).collect();
+    let mut group = c.benchmark_group("dov/audit-1-thread");
+    group.throughput(Throughput::Elements(6 * (r as u64) * (r as u64)));
+    let mut ids = IdCube::new(r);
+    let mut k = 0;
+    group.bench_function(format!("cube-map rays R={r}"), |b| {
+        b.iter(|| {
+            k = (k + 1) % cells.len();
+            pool.install(|| cpu.render_ids(cells[k].min, &mut ids).unwrap())
+        })
+    });
+    let rays = 24_576;
+    let sequence = hdov::dov::sampling::RegionSequence::new(rays);
+    group.throughput(Throughput::Elements(u64::from(rays)));
+    group.bench_function(format!("region rays {rays}"), |b| {
+        b.iter(|| {
+            k = (k + 1) % cells.len();
+            pool.install(|| hdov::dov::probe::region_finds(&cpu, &cells[k], &sequence))
         })
     });
     group.finish();

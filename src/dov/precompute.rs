@@ -20,7 +20,7 @@ use glam::Vec3;
 
 use super::adaptive::{AdaptiveSampling, sample_cell};
 use super::probe::{Leads, RayProbing, probe_cell, region_finds};
-use super::sampling::{interior_points, is_inside, seen_by};
+use super::sampling::{RegionSequence, interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
@@ -269,8 +269,9 @@ pub fn precompute_shard(
         let mut ids: Vec<usize> = cells.clone().flat_map(|id| neighbourhood_cells(grid, grid.cell_coords(id), REGION_RING)).collect();
         ids.sort_unstable();
         ids.dedup();
+        let sequence = RegionSequence::new(probing.region);
         for id in ids {
-            region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), probing.region));
+            region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), &sequence));
             out.probe_rays += u64::from(probing.region);
         }
     }

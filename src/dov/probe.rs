@@ -30,7 +30,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
-use super::sampling::{RegionRays, halton_point, halton3};
+use super::sampling::{RegionRays, RegionSequence, halton_point, halton3};
 use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
 pub use crate::format::params::RayProbing;
 use crate::geom::Aabb;
@@ -43,6 +43,13 @@ pub trait RayCaster: Sync {
     /// lengths of `dir` (infinity: all): object id, with [`BACK_FACE_BIT`] when its surface is
     /// seen from behind, or [`NO_OBJECT`].
     fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32;
+
+    /// [`RayCaster::first_hit`] of each ray (origin, direction) with unbounded reach, in turn.
+    /// A caster may carry what one ray met to the next, so rays in a coherent order (nearby
+    /// directions one after another) can be faster; the ids are the same.
+    fn first_hits(&self, rays: &[(Vec3, Vec3)]) -> Vec<u32> {
+        rays.iter().map(|&(o, d)| self.first_hit(o, d, f32::INFINITY)).collect()
+    }
 
     /// Points on every object's surface to aim at.
     fn targets(&self) -> &SurfaceTargets;
@@ -281,22 +288,85 @@ pub fn probe_cell(
     CellProbe { points: out, rays: cast, footprint_rays }
 }
 
-/// The objects that `count` region rays of `cell` ([`RegionRays`]) meet first from the front,
-/// each once, with the origin of the first ray that met it, in object order. A ray from inside a
-/// closed mesh meets its back faces first and finds nothing.
-pub fn region_finds(rays: &dyn RayCaster, cell: &Aabb, count: u32) -> Vec<(u32, Vec3)> {
+/// The objects that the region rays of `cell` ([`RegionRays`] over `sequence`) meet first from
+/// the front, each once, with the origin of the first ray that met it, in object order. A ray
+/// from inside a closed mesh meets its back faces first and finds nothing.
+///
+/// The rays are traced sorted by direction (a 16 × 16 grid on each cube face), so that one ray
+/// after another meets the same walls and the caster's last hit bounds the next; which ray met
+/// an object first is still its place in the sequence, so the order changes no result.
+pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
     let region = RegionRays::new(cell);
-    let mut met: Vec<(u32, u32, Vec3)> = (1..=count)
-        .into_par_iter()
-        .filter_map(|k| {
-            let (origin, dir) = region.ray(k);
-            let id = rays.first_hit(origin, dir, f32::INFINITY);
-            (id != NO_OBJECT && id & BACK_FACE_BIT == 0).then_some((id, k, origin))
+    let rays: Vec<(Vec3, Vec3)> = sequence.points().par_iter().map(|h| region.ray(h)).collect();
+    // A counting sort by bin, in sequence order within each bin.
+    let bins: Vec<u32> = rays.iter().map(|r| direction_bin(r.1)).collect();
+    let mut start = vec![0u32; DIRECTION_BINS as usize + 1];
+    for &b in &bins {
+        start[b as usize + 1] += 1;
+    }
+    for b in 1..start.len() {
+        start[b] += start[b - 1];
+    }
+    let mut order = vec![(0u32, Vec3::ZERO, Vec3::ZERO); rays.len()];
+    for (k, (&b, &(origin, dir))) in bins.iter().zip(&rays).enumerate() {
+        order[start[b as usize] as usize] = (k as u32, origin, dir);
+        start[b as usize] += 1;
+    }
+    // Per object, the first ray in sequence order that met it, and that ray's origin.
+    let keep_first = |map: &mut HashMap<u32, (u32, Vec3)>, id: u32, ray: (u32, Vec3)| {
+        let f = map.entry(id).or_insert(ray);
+        if ray.0 < f.0 {
+            *f = ray;
+        }
+    };
+    let first = order
+        .par_chunks(REGION_CHUNK)
+        .map(|chunk| {
+            let ids = caster.first_hits(&chunk.iter().map(|r| (r.1, r.2)).collect::<Vec<_>>());
+            let mut first: HashMap<u32, (u32, Vec3)> = HashMap::new();
+            for (r, id) in chunk.iter().zip(ids).filter(|(_, id)| *id != NO_OBJECT && id & BACK_FACE_BIT == 0) {
+                keep_first(&mut first, id, (r.0, r.1));
+            }
+            first
         })
-        .collect();
-    met.sort_unstable_by_key(|m| (m.0, m.1));
-    met.dedup_by_key(|m| m.0);
-    met.into_iter().map(|(id, _, origin)| (id, origin)).collect()
+        .reduce(HashMap::new, |mut a, b| {
+            for (id, f) in b {
+                keep_first(&mut a, id, f);
+            }
+            a
+        });
+    let mut met: Vec<(u32, Vec3)> = first.into_iter().map(|(id, (_, origin))| (id, origin)).collect();
+    met.sort_unstable_by_key(|m| m.0);
+    met
+}
+
+/// Region rays traced one after another by one thread: enough to share a last hit over many
+/// rays, few enough to spread a cell's rays over the threads.
+const REGION_CHUNK: usize = 2048;
+
+/// Bins of [`direction_bin`].
+const DIRECTION_BINS: u32 = 6 * 16 * 16;
+
+/// The bin of a direction on a 16 × 16 grid on each face of the cube: rays in one bin point
+/// within about 7° of each other.
+fn direction_bin(d: Vec3) -> u32 {
+    const BINS: f32 = 16.0;
+    let a = d.abs();
+    let (axis, major) = if a.x >= a.y && a.x >= a.z {
+        (0, d.x)
+    } else if a.y >= a.z {
+        (1, d.y)
+    } else {
+        (2, d.z)
+    };
+    let face = 2 * axis + u32::from(major < 0.0);
+    let (u, v) = match axis {
+        0 => (d.y, d.z),
+        1 => (d.x, d.z),
+        _ => (d.x, d.y),
+    };
+    let bin = |c: f32| (((c / major.abs() + 1.0) * 0.5 * BINS) as u32).min(BINS as u32 - 1);
+    (face * BINS as u32 + bin(v)) * BINS as u32 + bin(u)
 }
 
 /// The DoV of `object` from `p` on the cube map's texels whose centre ray enters its box `b`:
@@ -424,6 +494,29 @@ mod tests {
         s.add_box("below", Vec3::new(-6.0, -3.0, -6.0), Vec3::new(6.0, -2.0, 6.0));
         s.add_box("far", Vec3::new(-20.0, 3.0, -30.0), Vec3::new(-19.0, 4.0, -29.5));
         s
+    }
+
+    /// Traced in direction order, the region rays find what tracing them in sequence order finds:
+    /// each object hit from the front, with the origin of the first ray (in sequence) to hit it.
+    #[test]
+    fn region_finds_are_the_sequence_order_scan() {
+        let scene = boxes();
+        let cpu = CpuBackend::new(&scene, 16).unwrap();
+        let sequence = RegionSequence::new(3000);
+        for cell in [Aabb::new(Vec3::new(-0.5, -0.5, -0.5), Vec3::new(0.5, 0.5, 0.5)), Aabb::new(Vec3::ZERO, Vec3::ONE)] {
+            let region = RegionRays::new(&cell);
+            let mut expected: Vec<(u32, Vec3)> = Vec::new();
+            for h in sequence.points() {
+                let (origin, dir) = region.ray(h);
+                let id = cpu.first_hit(origin, dir, f32::INFINITY);
+                if id != NO_OBJECT && id & BACK_FACE_BIT == 0 && !expected.iter().any(|e| e.0 == id) {
+                    expected.push((id, origin));
+                }
+            }
+            expected.sort_by_key(|e| e.0);
+            assert!(expected.len() >= 3, "{} objects found", expected.len());
+            assert_eq!(region_finds(&cpu, &cell, &sequence), expected);
+        }
     }
 
     #[test]

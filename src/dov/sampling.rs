@@ -48,14 +48,29 @@ impl RegionRays {
         Self { cell: *cell, shift: std::array::from_fn(|_| rng.unit()) }
     }
 
-    /// The `k`-th (k ≥ 1) ray: its origin and unit direction.
-    pub fn ray(&self, k: u32) -> (Vec3, Vec3) {
-        let u = |i: usize, base: u32| (radical_inverse(k, base) + self.shift[i]).fract();
-        let origin = self.cell.min + Vec3::new(u(0, 2), u(1, 3), u(2, 5)) * self.cell.extent();
-        let z = 1.0 - 2.0 * u(3, 7);
-        let phi = std::f32::consts::TAU * u(4, 11);
+    /// The ray of one point of a [`RegionSequence`]: its origin and unit direction.
+    pub fn ray(&self, h: &[f32; 5]) -> (Vec3, Vec3) {
+        let u = |i: usize| (h[i] + self.shift[i]).fract();
+        let origin = self.cell.min + Vec3::new(u(0), u(1), u(2)) * self.cell.extent();
+        let z = 1.0 - 2.0 * u(3);
+        let phi = std::f32::consts::TAU * u(4);
         let r = (1.0 - z * z).max(0.0).sqrt();
         (origin, Vec3::new(r * phi.cos(), z, r * phi.sin()))
+    }
+}
+
+/// The region rays' Halton points 1 to `count` in bases 2, 3, 5, 7, 11, before any cell's shift:
+/// the same for every cell, so a build computes them once, not once per cell.
+pub struct RegionSequence(Vec<[f32; 5]>);
+
+impl RegionSequence {
+    pub fn new(count: u32) -> Self {
+        Self((1..=count).map(|k| [2, 3, 5, 7, 11].map(|base| radical_inverse(k, base))).collect())
+    }
+
+    /// Point `k` (from 0) is the sequence's point `k + 1`.
+    pub fn points(&self) -> &[[f32; 5]] {
+        &self.0
     }
 }
 

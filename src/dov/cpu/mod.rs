@@ -243,6 +243,21 @@ impl RayCaster for CpuBackend {
         })
     }
 
+    /// By the fast path, each ray bounded first by the previous one's nearest triangle.
+    fn first_hits(&self, rays: &[(Vec3, Vec3)]) -> Vec<u32> {
+        if std::env::var_os("HDOV_PLAIN").is_some() {
+            return rays.iter().map(|&(o, d)| self.first_hit(o, d, f32::INFINITY)).collect();
+        }
+        let rays: Vec<(Vec3A, Vec3A)> =
+            rays.iter().map(|&(o, d)| (Vec3A::from(o), Vec3A::from(d / d.abs().max_element()))).collect();
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+            return unsafe { self.first_hits_wide(&rays) };
+        }
+        self.first_hits_fast::<false>(&rays)
+    }
+
     fn targets(&self) -> &SurfaceTargets {
         &self.targets
     }
@@ -409,6 +424,27 @@ mod tests {
                 cpu.traverse_all::<false>(o, d / scale, &mut plain);
                 prop_assert_eq!(cpu.first_hit(o.into(), d.into(), reach), plain.id());
             }
+        }
+
+        /// A batch of rays (region rays' route) gets each ray's own first hit, also where each
+        /// ray is bounded by the previous one's nearest triangle: rays near each other in origin
+        /// and direction, as region rays are traced, with a far one in between.
+        #[test]
+        fn first_hits_are_first_hit_ray_by_ray(
+            base in (vec3a(), vec3a()),
+            offsets in prop::collection::vec((vec3a(), vec3a()), 1..48),
+        ) {
+            let scene = boxes();
+            let cpu = CpuBackend::new(&scene, 8).unwrap();
+            let rays: Vec<(Vec3, Vec3)> = offsets
+                .iter()
+                .enumerate()
+                .map(|(k, (o, d))| if k % 7 == 3 { (*o, *d) } else { (base.0 + 0.05 * *o, base.1 + 0.05 * *d) })
+                .map(|(o, d)| (o.into(), d.into()))
+                .filter(|(_, d): &(Vec3, Vec3)| d.abs().max_element() > 0.0)
+                .collect();
+            let one_by_one: Vec<u32> = rays.iter().map(|&(o, d)| cpu.first_hit(o, d, f32::INFINITY)).collect();
+            prop_assert_eq!(cpu.first_hits(&rays), one_by_one);
         }
 
         /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may

@@ -229,6 +229,28 @@ impl CpuBackend {
         window.id()
     }
 
+    /// The first hit of each ray (origin, direction with its largest component ±1) in turn, by
+    /// the fast path: each ray first bounded by the previous one's winning triangle, so rays in
+    /// a coherent order skip most of the boxes behind it. Equals [`CpuBackend::trace`]'s ids.
+    #[inline(always)]
+    pub(super) fn first_hits_fast<const WIDE: bool>(&self, rays: &[(Vec3A, Vec3A)]) -> Vec<u32> {
+        let mut state = TexelState::default();
+        let mut ids = Vec::with_capacity(rays.len());
+        // A loop, not a closure: a closure would not inherit the caller's target features, and
+        // the AVX2 node test inlined into it would become calls.
+        for &(o, d) in rays {
+            ids.push(self.trace_fast::<WIDE>(o, d, &mut state));
+        }
+        ids
+    }
+
+    /// [`CpuBackend::first_hits_fast`] compiled as in [`CpuBackend::trace_band_wide`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    pub(super) unsafe fn first_hits_wide(&self, rays: &[(Vec3A, Vec3A)]) -> Vec<u32> {
+        self.first_hits_fast::<true>(rays)
+    }
+
     /// Adds to `window` the hits of every instance nearer than its bound.
     #[inline(always)]
     pub(super) fn traverse_all<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, window: &mut TieWindow) {
@@ -516,7 +538,10 @@ impl CpuBackend {
         match &inst.to_model {
             None => *p,
             Some(m) => {
-                let dirs = p.dirs.map(|d| m.transform_vector3a(d));
+                let mut dirs = p.dirs;
+                for d in &mut dirs {
+                    *d = m.transform_vector3a(*d);
+                }
                 packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes)
             }
         }
