@@ -65,8 +65,12 @@ fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
     let probed = build("probed", &["--backend", "cpu", "--samples", "probe:8:2"]);
     assert_eq!(probed["build"]["visibility"]["probe"], "probe:8:2");
     assert_eq!(probed["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box"]));
+    // The default is region rays (decision 98), with both floors.
+    let default = build("default", &["--backend", "cpu"]);
+    assert_eq!(default["build"]["visibility"]["probe"], "probe:32:4:24576");
+    assert_eq!(default["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box", "neighbours"]));
     let bare = ["--backend", "cpu", "--zero-dov-floor", "none"];
-    let corners = build("corners", &bare);
+    let corners = build("corners", &[&bare[..], &["--samples", "corners"]].concat());
     assert!(corners["build"]["visibility"].get("probe").is_none());
     build("probed-bare", &[&bare[..], &["--samples", "probe:8:2"]].concat());
     let objects = |name: &str, at: &str| -> std::collections::BTreeSet<u64> {

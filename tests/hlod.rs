@@ -153,7 +153,10 @@ fn internal_chains_are_monotone_and_errors_grow_up_the_tree() {
 
 /// Sixteen balls 60 m behind a wall with a window: seen from the street through it, they are
 /// barely visible, and most come back as the internal LODs of the tree nodes holding them (four
-/// leaves at fan-out 4), in fewer draw calls than naive's.
+/// leaves at fan-out 4), in fewer draw calls than naive's. Sampled at the cell's corners, which
+/// see the window's outer two columns (8 balls): region rays also find the inner columns from
+/// part of the cell, and a leaf of four visible balls is then seen too well to stop at (its DoV
+/// relaxes the bound less than each ball's own does).
 #[test]
 fn a_far_cluster_of_barely_visible_objects_comes_back_as_nodes() {
     let mut scene = Scene::default();
@@ -174,7 +177,12 @@ fn a_far_cluster_of_barely_visible_objects_comes_back_as_nodes() {
     let path = dir.path().join("db");
     let params = BuildParams {
         fanout: Some(4),
-        visibility: Some(VisibilityParams { resolution: 128, backend: BackendKind::Cpu, ..Default::default() }),
+        visibility: Some(VisibilityParams {
+            resolution: 128,
+            backend: BackendKind::Cpu,
+            sampling: hdov::Sampling::Interior(0),
+            ..Default::default()
+        }),
         ..Default::default()
     };
     hdov::build(&scene, &path, &params, Overwrite::Never, &Progress::hidden()).unwrap();

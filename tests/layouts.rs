@@ -40,7 +40,7 @@ fn fixture() -> Fixture {
         &grid,
         &scene.all_object_bounds(),
         &shape,
-        &PrecomputeOptions::default(),
+        &PrecomputeOptions::of(params.visibility.as_ref().unwrap()),
         Shard::ALL,
         &hdov::progress::Quiet,
     )

@@ -349,13 +349,7 @@ fn build_visibility(
     }
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
-    let options = PrecomputeOptions {
-        interior_samples: v.sampling.interior_samples(),
-        adaptive: v.sampling.adaptive(),
-        probe: v.sampling.probe(),
-        zero_dov_tests: v.zero_dov_floor.clone(),
-        ..Default::default()
-    };
+    let options = PrecomputeOptions::of(v);
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(
         backend.as_mut(),

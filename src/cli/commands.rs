@@ -96,13 +96,14 @@ pub struct VisibilityArgs {
     /// Texels per cube-face edge for the DoV measurement.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
-    /// Sample points per cell: `corners` (the 8 shared corners), a number K of stratified
-    /// interior points in addition to the corners, or `adaptive[:SEEDS:BUDGET]`: points where new
-    /// objects appear, at most BUDGET per cell, or `probe[:POINTS:RAYS[:REGION]]`: rays from
-    /// POINTS points of each cell towards the objects its neighbourhood sees, RAYS per point and
-    /// object, and REGION rays from all over the cell in every direction, or `region`
-    /// (probe:32:4:24576: the fewest wrong pixels from anywhere in a cell; docs/dov.md).
-    #[arg(long, default_value = "corners")]
+    /// Sample points per cell: `region` (probe:32:4:24576: the fewest wrong pixels from anywhere
+    /// in a cell; docs/dov.md), `corners` (the 8 shared corners alone: the cheap option, a third
+    /// to a half of region's visibility time), a number K of stratified interior points in
+    /// addition to the corners, `adaptive[:SEEDS:BUDGET]`: points where new objects appear, at
+    /// most BUDGET per cell, or `probe[:POINTS:RAYS[:REGION]]`: rays from POINTS points of each
+    /// cell towards the objects its neighbourhood sees, RAYS per point and object, and REGION
+    /// rays from all over the cell in every direction.
+    #[arg(long, default_value = "region")]
     samples: Sampling,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.
     #[arg(long, default_value = "auto")]

@@ -24,6 +24,7 @@ use super::sampling::{RegionSequence, interior_points, is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
+use crate::format::params::VisibilityParams;
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 use crate::progress::Report;
@@ -135,6 +136,8 @@ pub struct PrecomputeOptions {
     pub skip_inside_points: bool,
 }
 
+/// The corners alone, with both floors: the thesis's sampling (a build's default sampler is
+/// [`crate::format::params::Sampling::default`]: [`PrecomputeOptions::of`]).
 impl Default for PrecomputeOptions {
     fn default() -> Self {
         Self {
@@ -148,6 +151,17 @@ impl Default for PrecomputeOptions {
 }
 
 impl PrecomputeOptions {
+    /// What a build with `v` measures.
+    pub fn of(v: &VisibilityParams) -> Self {
+        PrecomputeOptions {
+            interior_samples: v.sampling.interior_samples(),
+            adaptive: v.sampling.adaptive(),
+            probe: v.sampling.probe(),
+            zero_dov_tests: v.zero_dov_floor.clone(),
+            ..Default::default()
+        }
+    }
+
     fn uses_neighbours(&self) -> bool {
         self.zero_dov_tests.contains(&FloorTest::NeighbourCorners)
     }

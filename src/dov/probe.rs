@@ -44,11 +44,11 @@ pub trait RayCaster: Sync {
     /// seen from behind, or [`NO_OBJECT`].
     fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32;
 
-    /// [`RayCaster::first_hit`] of each ray (origin, direction) with unbounded reach, in turn.
-    /// A caster may carry what one ray met to the next, so rays in a coherent order (nearby
+    /// [`RayCaster::first_hit`] of each ray (origin, direction) within `reach`, in turn. A
+    /// caster may carry what one ray met to the next, so rays in a coherent order (nearby
     /// directions one after another) can be faster; the ids are the same.
-    fn first_hits(&self, rays: &[(Vec3, Vec3)]) -> Vec<u32> {
-        rays.iter().map(|&(o, d)| self.first_hit(o, d, f32::INFINITY)).collect()
+    fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
+        rays.iter().map(|&(o, d)| self.first_hit(o, d, reach)).collect()
     }
 
     /// Points on every object's surface to aim at.
@@ -133,18 +133,39 @@ struct Aim<'a> {
 impl Aim<'_> {
     /// Casts `per_point` rays from each probe point outside geometry towards `object`'s targets
     /// (each point its own targets), calling `on_hit(point, id)` with each first hit until it
-    /// returns false.
-    fn each_ray(&self, object: u32, mut on_hit: impl FnMut(usize, u32) -> bool) {
-        for (i, &p) in self.points.iter().enumerate().filter(|&(i, _)| self.outside[i]) {
-            for j in 0..self.per_point {
-                let d = self.rays.targets().target(object, i * self.per_point + j) - p;
-                if d.length_squared() > 0.0 && !on_hit(i, self.rays.first_hit(p, d, TARGET_REACH)) {
-                    return;
+    /// returns false; returns the rays cast. The rays go in batches of [`AIM_BATCH`], one point's
+    /// after another's, so that each is bounded first by the last one's nearest hit (a hidden
+    /// candidate's rays meet the same walls); a batch's rays after the one that stops are cast
+    /// and not reported.
+    fn each_ray(&self, object: u32, mut on_hit: impl FnMut(usize, u32) -> bool) -> u64 {
+        let mut cast = 0;
+        let mut batch: Vec<(Vec3, Vec3)> = Vec::with_capacity(AIM_BATCH);
+        let mut from: Vec<usize> = Vec::with_capacity(AIM_BATCH);
+        let mut rays = self.points.iter().enumerate().filter(|&(i, _)| self.outside[i]).flat_map(|(i, &p)| {
+            (0..self.per_point).map(move |j| (i, p, self.rays.targets().target(object, i * self.per_point + j) - p))
+        });
+        loop {
+            batch.clear();
+            from.clear();
+            for (i, p, d) in rays.by_ref().filter(|r| r.2.length_squared() > 0.0).take(AIM_BATCH) {
+                batch.push((p, d));
+                from.push(i);
+            }
+            if batch.is_empty() {
+                return cast;
+            }
+            cast += batch.len() as u64;
+            for (&i, id) in from.iter().zip(self.rays.first_hits(&batch, TARGET_REACH)) {
+                if !on_hit(i, id) {
+                    return cast;
                 }
             }
         }
     }
 }
+
+/// Aimed rays traced together (see [`Aim::each_ray`]).
+const AIM_BATCH: usize = 32;
 
 /// Directions from a point for telling whether it lies inside geometry: the 26 neighbours of a
 /// cube's centre.
@@ -210,9 +231,7 @@ pub fn probe_cell(
         .filter(|c| !seen.contains(c))
         .map(|&c| {
             let mut met = Vec::new();
-            let mut n = 0u64;
-            aim.each_ray(c, |i, id| {
-                n += 1;
+            let n = aim.each_ray(c, |i, id| {
                 let object = id & !BACK_FACE_BIT;
                 if id != NO_OBJECT && !seen.contains(&object) {
                     met.push((object, i));
@@ -242,9 +261,7 @@ pub fn probe_cell(
         .par_iter()
         .map(|&(object, seen_from)| {
             let mut hits = vec![0u32; points.len()];
-            let mut n = 0u64;
-            aim.each_ray(object, |i, id| {
-                n += 1;
+            let n = aim.each_ray(object, |i, id| {
                 hits[i] += u32::from(id & !BACK_FACE_BIT == object);
                 true
             });
@@ -322,7 +339,7 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
     let first = order
         .par_chunks(REGION_CHUNK)
         .map(|chunk| {
-            let ids = caster.first_hits(&chunk.iter().map(|r| (r.1, r.2)).collect::<Vec<_>>());
+            let ids = caster.first_hits(&chunk.iter().map(|r| (r.1, r.2)).collect::<Vec<_>>(), f32::INFINITY);
             let mut first: HashMap<u32, (u32, Vec3)> = HashMap::new();
             for (r, id) in chunk.iter().zip(ids).filter(|(_, id)| *id != NO_OBJECT && id & BACK_FACE_BIT == 0) {
                 keep_first(&mut first, id, (r.0, r.1));

@@ -147,14 +147,17 @@ fn small_scale_writes_every_csv_and_chart_with_sane_numbers() {
     assert!(num(coplanar, "cv_under_jitter") < 0.1, "the tie rule keeps coplanar faces steady");
 
     if gpu {
-        // Accuracy: under each LOD rule η = 0 is at least as faithful as η = 8e-3 and draws at
-        // least as many faces; the default screen-error levels beat the thesis's eq. 5.6 levels;
-        // a larger pixel bound never draws more.
+        // Accuracy: under each LOD rule η = 0 is at least as faithful as η = 8e-3 (the thesis's
+        // within 0.25 dB) and draws at least as many faces; the default screen-error levels beat
+        // the thesis's eq. 5.6 levels; a larger pixel bound never draws more.
         let acc = rows(&out, "accuracy");
         let row = |rule: &str, p: &str| acc.iter().find(|r| r["rule"] == rule && r["parameter"] == p).unwrap();
         let psnr = |rule: &str, p: &str| row(rule, p)["psnr_db"].parse::<f64>().unwrap_or(f64::INFINITY);
-        for rule in ["η, screen 0.5 px (default)", "η, eq. 5.6 (thesis)"] {
-            assert!(psnr(rule, "0") >= psnr(rule, "0.008"), "{rule}");
+        // The thesis's levels are not monotone in PSNR: where eq. 5.6 puts barely visible
+        // objects at very coarse levels, a subtree's internal LOD can look a little better
+        // (23.50 against 23.57 dB on the small city built with region rays).
+        for (rule, slack) in [("η, screen 0.5 px (default)", 0.0), ("η, eq. 5.6 (thesis)", 0.25)] {
+            assert!(psnr(rule, "0") >= psnr(rule, "0.008") - slack, "{rule}");
             assert!(num(row(rule, "0"), "faces") >= num(row(rule, "0.008"), "faces"), "{rule}");
         }
         assert!(psnr("η, screen 0.5 px (default)", "0.001") > psnr("η, eq. 5.6 (thesis)", "0.001"));

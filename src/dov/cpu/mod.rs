@@ -244,12 +244,15 @@ impl RayCaster for CpuBackend {
     }
 
     /// By the fast path, each ray bounded first by the previous one's nearest triangle.
-    fn first_hits(&self, rays: &[(Vec3, Vec3)]) -> Vec<u32> {
-        if std::env::var_os("HDOV_PLAIN").is_some() {
-            return rays.iter().map(|&(o, d)| self.first_hit(o, d, f32::INFINITY)).collect();
-        }
-        let rays: Vec<(Vec3A, Vec3A)> =
-            rays.iter().map(|&(o, d)| (Vec3A::from(o), Vec3A::from(d / d.abs().max_element()))).collect();
+    fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
+        // As `first_hit` scales each ray, with the same rounding of its bound.
+        let rays: Vec<(Vec3A, Vec3A, f32)> = rays
+            .iter()
+            .map(|&(o, d)| {
+                let scale = d.abs().max_element();
+                (Vec3A::from(o), Vec3A::from(d / scale), reach * scale)
+            })
+            .collect();
         #[cfg(target_arch = "x86_64")]
         if self.wide {
             // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
@@ -426,9 +429,9 @@ mod tests {
             }
         }
 
-        /// A batch of rays (region rays' route) gets each ray's own first hit, also where each
-        /// ray is bounded by the previous one's nearest triangle: rays near each other in origin
-        /// and direction, as region rays are traced, with a far one in between.
+        /// A batch of rays (region and probe rays' route) gets each ray's own first hit within
+        /// the reach, also where each ray is bounded by the previous one's nearest triangle: rays
+        /// near each other in origin and direction, as they are traced, with a far one between.
         #[test]
         fn first_hits_are_first_hit_ray_by_ray(
             base in (vec3a(), vec3a()),
@@ -443,8 +446,10 @@ mod tests {
                 .map(|(o, d)| (o.into(), d.into()))
                 .filter(|(_, d): &(Vec3, Vec3)| d.abs().max_element() > 0.0)
                 .collect();
-            let one_by_one: Vec<u32> = rays.iter().map(|&(o, d)| cpu.first_hit(o, d, f32::INFINITY)).collect();
-            prop_assert_eq!(cpu.first_hits(&rays), one_by_one);
+            for reach in [f32::INFINITY, 1.0, 6.0] {
+                let one_by_one: Vec<u32> = rays.iter().map(|&(o, d)| cpu.first_hit(o, d, reach)).collect();
+                prop_assert_eq!(cpu.first_hits(&rays, reach), one_by_one);
+            }
         }
 
         /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may

@@ -208,18 +208,30 @@ impl CpuBackend {
     /// the reference would not see that hit; then the ray is traced again without the bound.
     #[inline(always)]
     fn trace_fast<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, state: &mut TexelState) -> u32 {
+        self.trace_fast_within::<WIDE>(o, d, f32::INFINITY, state)
+    }
+
+    /// [`CpuBackend::trace_fast`] among the hits up to `bound` along `d`.
+    #[inline(always)]
+    fn trace_fast_within<const WIDE: bool>(&self, o: Vec3A, d: Vec3A, bound: f32, state: &mut TexelState) -> u32 {
         let window = &mut state.window;
         window.clear();
+        window.bound = bound;
         let mut hint_t = f32::INFINITY;
         if let Some((ii, i)) = state.last {
             let inst = &self.instances[ii as usize];
             let ray = self.instance_ray(inst, o, d, f32::INFINITY);
-            hint_t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
-            window.bound = hint_t * (1.0 + TIE_EPSILON);
+            let t = self.blases[inst.blas as usize].triangles[i as usize].intersect(&ray);
+            // A hint beyond the bound bounds nothing.
+            if t * (1.0 + TIE_EPSILON) < bound {
+                hint_t = t;
+                window.bound = t * (1.0 + TIE_EPSILON);
+            }
         }
         self.traverse_all::<WIDE>(o, d, window);
         if window.t_near > hint_t {
             window.clear();
+            window.bound = bound;
             self.traverse_all::<WIDE>(o, d, window);
         }
         // A miss keeps the last hit: the next ray may well hit it.
@@ -229,17 +241,18 @@ impl CpuBackend {
         window.id()
     }
 
-    /// The first hit of each ray (origin, direction with its largest component ±1) in turn, by
-    /// the fast path: each ray first bounded by the previous one's winning triangle, so rays in
-    /// a coherent order skip most of the boxes behind it. Equals [`CpuBackend::trace`]'s ids.
+    /// The first hit of each ray (origin, direction with its largest component ±1, the hits up
+    /// to its bound along it) in turn, by the fast path: each ray first bounded by the previous
+    /// one's winning triangle, so rays in a coherent order skip most of the boxes behind it.
+    /// Equals a plain traversal's ids within each bound.
     #[inline(always)]
-    pub(super) fn first_hits_fast<const WIDE: bool>(&self, rays: &[(Vec3A, Vec3A)]) -> Vec<u32> {
+    pub(super) fn first_hits_fast<const WIDE: bool>(&self, rays: &[(Vec3A, Vec3A, f32)]) -> Vec<u32> {
         let mut state = TexelState::default();
         let mut ids = Vec::with_capacity(rays.len());
         // A loop, not a closure: a closure would not inherit the caller's target features, and
         // the AVX2 node test inlined into it would become calls.
-        for &(o, d) in rays {
-            ids.push(self.trace_fast::<WIDE>(o, d, &mut state));
+        for &(o, d, bound) in rays {
+            ids.push(self.trace_fast_within::<WIDE>(o, d, bound, &mut state));
         }
         ids
     }
@@ -247,7 +260,7 @@ impl CpuBackend {
     /// [`CpuBackend::first_hits_fast`] compiled as in [`CpuBackend::trace_band_wide`].
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    pub(super) unsafe fn first_hits_wide(&self, rays: &[(Vec3A, Vec3A)]) -> Vec<u32> {
+    pub(super) unsafe fn first_hits_wide(&self, rays: &[(Vec3A, Vec3A, f32)]) -> Vec<u32> {
         self.first_hits_fast::<true>(rays)
     }
 
