@@ -127,8 +127,8 @@ impl CubeMap {
         (2.0 / self.resolution as f64).powi(2) / self.total_weight
     }
 
-    /// The texel whose centre direction is nearest `dir` (for tests and debugging): `(face, row,
-    /// col)`. Returns `None` for a zero or non-finite direction.
+    /// The texel whose centre direction is nearest `dir` (tests, and the bins region rays are
+    /// sorted into): `(face, row, col)`. Returns `None` for a zero or non-finite direction.
     pub fn texel_of_direction(&self, dir: Vec3) -> Option<(usize, u32, u32)> {
         if !dir.is_finite() || dir == Vec3::ZERO {
             return None;

@@ -309,24 +309,31 @@ pub fn probe_cell(
 /// the front, each once, with the origin of the first ray that met it, in object order. A ray
 /// from inside a closed mesh meets its back faces first and finds nothing.
 ///
-/// The rays are traced sorted by direction (a 16 × 16 grid on each cube face), so that one ray
+/// The rays are traced sorted by direction (the texels of a 16² cube map), so that one ray
 /// after another meets the same walls and the caster's last hit bounds the next; which ray met
 /// an object first is still its place in the sequence, so the order changes no result.
 pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
     let region = RegionRays::new(cell);
     let rays: Vec<(Vec3, Vec3)> = sequence.points().par_iter().map(|h| region.ray(h)).collect();
-    // A counting sort by bin, in sequence order within each bin.
-    let bins: Vec<u32> = rays.iter().map(|r| direction_bin(r.1)).collect();
-    let mut start = vec![0u32; DIRECTION_BINS as usize + 1];
-    for &b in &bins {
+    // A counting sort by direction bin (a texel of a 16² cube map), in sequence order within
+    // each bin: `sorted[i]` is the ray of sequence place `place[i]`.
+    let bins = CubeMap::new(DIRECTION_BINS);
+    let bin = |d: Vec3| {
+        let (face, row, col) = bins.texel_of_direction(d).unwrap_or_default();
+        (face as u32 * DIRECTION_BINS + row) * DIRECTION_BINS + col
+    };
+    let keys: Vec<u32> = rays.iter().map(|r| bin(r.1)).collect();
+    let mut start = vec![0u32; bins.texel_count() + 1];
+    for &b in &keys {
         start[b as usize + 1] += 1;
     }
     for b in 1..start.len() {
         start[b] += start[b - 1];
     }
-    let mut order = vec![(0u32, Vec3::ZERO, Vec3::ZERO); rays.len()];
-    for (k, (&b, &(origin, dir))) in bins.iter().zip(&rays).enumerate() {
-        order[start[b as usize] as usize] = (k as u32, origin, dir);
+    let (mut sorted, mut place) = (vec![(Vec3::ZERO, Vec3::ZERO); rays.len()], vec![0u32; rays.len()]);
+    for (k, (&b, &ray)) in keys.iter().zip(&rays).enumerate() {
+        let i = start[b as usize] as usize;
+        (sorted[i], place[i]) = (ray, k as u32);
         start[b as usize] += 1;
     }
     // Per object, the first ray in sequence order that met it, and that ray's origin.
@@ -336,13 +343,16 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
             *f = ray;
         }
     };
-    let first = order
+    let first = sorted
         .par_chunks(REGION_CHUNK)
-        .map(|chunk| {
-            let ids = caster.first_hits(&chunk.iter().map(|r| (r.1, r.2)).collect::<Vec<_>>(), f32::INFINITY);
+        .zip(place.par_chunks(REGION_CHUNK))
+        .map(|(rays, places)| {
             let mut first: HashMap<u32, (u32, Vec3)> = HashMap::new();
-            for (r, id) in chunk.iter().zip(ids).filter(|(_, id)| *id != NO_OBJECT && id & BACK_FACE_BIT == 0) {
-                keep_first(&mut first, id, (r.0, r.1));
+            let ids = caster.first_hits(rays, f32::INFINITY);
+            for ((ray, &k), id) in rays.iter().zip(places).zip(ids) {
+                if id != NO_OBJECT && id & BACK_FACE_BIT == 0 {
+                    keep_first(&mut first, id, (k, ray.0));
+                }
             }
             first
         })
@@ -361,30 +371,9 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
 /// rays, few enough to spread a cell's rays over the threads.
 const REGION_CHUNK: usize = 2048;
 
-/// Bins of [`direction_bin`].
-const DIRECTION_BINS: u32 = 6 * 16 * 16;
-
-/// The bin of a direction on a 16 × 16 grid on each face of the cube: rays in one bin point
-/// within about 7° of each other.
-fn direction_bin(d: Vec3) -> u32 {
-    const BINS: f32 = 16.0;
-    let a = d.abs();
-    let (axis, major) = if a.x >= a.y && a.x >= a.z {
-        (0, d.x)
-    } else if a.y >= a.z {
-        (1, d.y)
-    } else {
-        (2, d.z)
-    };
-    let face = 2 * axis + u32::from(major < 0.0);
-    let (u, v) = match axis {
-        0 => (d.y, d.z),
-        1 => (d.x, d.z),
-        _ => (d.x, d.y),
-    };
-    let bin = |c: f32| (((c / major.abs() + 1.0) * 0.5 * BINS) as u32).min(BINS as u32 - 1);
-    (face * BINS as u32 + bin(v)) * BINS as u32 + bin(u)
-}
+/// Texels per edge of the cube map whose texels bin region rays by direction: rays in one bin
+/// point within about 7° of each other.
+const DIRECTION_BINS: u32 = 16;
 
 /// The DoV of `object` from `p` on the cube map's texels whose centre ray enters its box `b`:
 /// what a whole cube map at `p` would give it. An object that a probe ray meets but no texel
