@@ -193,6 +193,11 @@ fn baked_lods(scene: &Scene, lods: &[Vec<LodLevel>]) -> Vec<Vec<LodLevel>> {
         .collect()
 }
 
+/// Whether the backend draws through GL.
+fn draws_through_gl(backend: &GpuBackend) -> bool {
+    backend.adapter_name().ends_with("on Gl")
+}
+
 /// Texels where two id cubes differ.
 fn differing(a: &IdCube, b: &IdCube) -> Vec<usize> {
     (0..a.ids.len()).filter(|&i| a.ids[i] != b.ids[i]).collect()
@@ -245,7 +250,22 @@ fn gpu_instances_draw_like_baked_world_meshes_texel_for_texel() {
                 for &i in differ.iter().take(8) {
                     println!("  {p} texel {i}: instanced {:#x}, baked {:#x}", got.ids[i], expected.ids[i]);
                 }
-                assert!(differ.is_empty(), "LODs {with_lods}, {p}: {} texels differ", differ.len());
+                // llvmpipe through GL (not lavapipe, nor any Vulkan driver seen here) gives a
+                // pixel centre lying exactly on a shared edge, which this dyadic scene makes
+                // common, sometimes to neither of the two triangles sharing it, so the object's
+                // inside shows through: 6 texels of a row of the instanced drawing at (−3, 5, 2.5),
+                // 1 of the baked one at (−6, 9, 6) with LODs. The driver's fill rule, then, not
+                // instancing (the baked drawing has it too); on GL
+                // only, such texels (same object, only the back-face bit differs) may differ,
+                // at most 1 in 5,000. Any other difference fails everywhere.
+                let gl = draws_through_gl(backend);
+                let tie = |&i: &usize| gl && (got.ids[i] ^ expected.ids[i]) == BACK_FACE_BIT;
+                let ties = differ.iter().filter(|i| tie(i)).count();
+                assert!(
+                    differ.len() == ties && ties * 5_000 <= got.ids.len(),
+                    "LODs {with_lods}, {p}: {} texels differ ({ties} edge ties on GL)",
+                    differ.len()
+                );
             }
             let objects = seen(&expected);
             let back = expected.ids.iter().filter(|&&id| id != NO_OBJECT && id & BACK_FACE_BIT != 0).count();
