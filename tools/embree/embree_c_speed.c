@@ -68,7 +68,12 @@ int main(int argc, char **argv) {
   const uint32_t *ids = slurp(dir, "ids.u32", &len);
   if (rays != (size_t)6 * r * r || len != npoints * rays * 4) { fprintf(stderr, "files do not agree\n"); return 2; }
 
-  RTCDevice device = rtcNewDevice("threads=1");
+  /* EMBREE_MAX_ISA (e.g. avx2) caps Embree's kernels, to compare at hdov's vector width. */
+  char config[128];
+  const char *max_isa = getenv("EMBREE_MAX_ISA");
+  snprintf(config, sizeof config, "threads=1%s%s", max_isa ? ",max_isa=" : "", max_isa ? max_isa : "");
+  RTCDevice device = rtcNewDevice(config);
+  printf("embree device config: %s\n", config);
   RTCScene scene = rtcNewScene(device);
   rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);

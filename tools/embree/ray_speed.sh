@@ -5,6 +5,7 @@
 # rtcIntersect16; needs Debian's libembree-dev), then the Python binding if it is installed
 # (embree_ray_speed.py; `pip install embreex numpy`).
 #   tools/embree/ray_speed.sh SCENE OUT_DIR [RESOLUTION] [X,Y,Z]
+# EMBREE_MAX_ISA=avx2 (say) caps Embree's kernels, to compare at hdov's vector width.
 set -e
 [ $# -ge 2 ] || { echo "usage: ray_speed.sh SCENE OUT_DIR [RESOLUTION] [X,Y,Z]" >&2; exit 2; }
 cd "$(dirname "$0")/../.."

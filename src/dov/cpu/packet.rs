@@ -12,10 +12,7 @@
 use std::arch::x86_64::*;
 
 use glam::Vec3A;
-use obvhs::{
-    cwbvh::{CwBvh, node::CwBvhNode},
-    ray::Ray,
-};
+use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 
 use super::bvh::RayTriangle;
 use super::trace::NODE_TMIN;
@@ -49,23 +46,24 @@ impl Packet {
     #[target_feature(enable = "avx2")]
     #[inline]
     pub fn new(origin: Vec3A, dirs: &[Vec3A; LANES], lanes: u32) -> Self {
-        let (mut d, mut inv) = ([[0f32; LANES]; 3], [[0f32; LANES]; 3]);
-        let mut negative = [0u32; 3];
+        let mut d = [[0f32; LANES]; 3];
         for (l, dir) in dirs.iter().enumerate() {
-            // obvhs's own inverse (its `safe_inverse` for tiny components).
-            let ray = Ray::new(origin, *dir, 0.0, f32::INFINITY);
             for axis in 0..3 {
                 d[axis][l] = dir[axis];
-                inv[axis][l] = ray.inv_direction[axis];
-                negative[axis] |= u32::from(dir[axis] < 0.0) << l;
             }
         }
         // Loops, not `array::map`: the closure `map` calls cannot be inlined into it (it lacks
         // the caller's AVX2), and the call per element cost the packet tracer about a tenth.
-        let (mut dir, mut inverse) = ([splat(0.0); 3], [splat(0.0); 3]);
+        let (mut dir, mut inverse, mut negative) = ([splat(0.0); 3], [splat(0.0); 3], [0u32; 3]);
         for axis in 0..3 {
             dir[axis] = load(&d[axis]);
-            inverse[axis] = load(&inv[axis]);
+            for h in 0..HALVES {
+                // obvhs's `Ray::inv_direction`, eight lanes at a time (was a scalar division each).
+                inverse[axis][h] = safe_inverse(dir[axis][h]);
+                // `d < 0.0`, ordered: false for −0.0 (and NaN), as obvhs's octant.
+                let below = _mm256_cmp_ps::<_CMP_LT_OQ>(dir[axis][h], _mm256_setzero_ps());
+                negative[axis] |= (_mm256_movemask_ps(below) as u32) << (8 * h);
+            }
         }
         Self { origin, dirs: *dirs, dir, inv: inverse, lanes, negative }
     }
@@ -84,6 +82,19 @@ impl Packet {
         let side = |axis: usize| if oct & (4 >> axis) != 0 { self.negative[axis] } else { !self.negative[axis] };
         (oct, lanes & side(0) & side(1) & side(2))
     }
+}
+
+/// obvhs's `safe_inverse` lane by lane: `1 / x`, or `±1 / ε` with `x`'s sign where
+/// `|x| ≤ ε` (ε = `f32::EPSILON`). Division is exact in every lane as in scalar code, so the bits
+/// are obvhs's (tested through the box test against obvhs's).
+#[target_feature(enable = "avx2")]
+#[inline]
+fn safe_inverse(x: __m256) -> __m256 {
+    let sign = _mm256_and_ps(x, _mm256_set1_ps(-0.0));
+    let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), x);
+    let tiny = _mm256_cmp_ps::<_CMP_LE_OQ>(abs, _mm256_set1_ps(f32::EPSILON));
+    let clamped = _mm256_or_ps(sign, _mm256_set1_ps(1.0 / f32::EPSILON));
+    _mm256_blendv_ps(_mm256_div_ps(_mm256_set1_ps(1.0), x), clamped, tiny)
 }
 
 /// The `f32` of `a` in registers.
@@ -279,6 +290,7 @@ mod tests {
     use super::*;
     use obvhs::{
         BvhBuildParams,
+        ray::Ray,
         cwbvh::{builder::build_cwbvh_from_tris, node::extract_byte64},
         triangle::Triangle,
     };

@@ -473,15 +473,21 @@ impl CpuBackend {
         let mut hint_t = [f32::INFINITY; LANES];
         for &(ii, i) in &ps.last {
             let inst = &self.instances[ii as usize];
-            let q = self.instance_packet(inst, p);
+            let moved = self.instance_packet(inst, p);
+            let q = moved.as_ref().unwrap_or(p);
             let tri = &self.blases[inst.blas as usize].triangles[i as usize];
-            let (hits, t, _) = packet::intersect_triangle(tri, &q, self.near, packet::splat(f32::INFINITY), p.lanes);
+            let (hits, t, _) = packet::intersect_triangle(tri, q, self.near, packet::splat(f32::INFINITY), p.lanes);
             let t = packet::store(t);
             for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
                 hint_t[l] = hint_t[l].min(t[l]);
             }
         }
-        ps.windows.reset(hint_t.map(|t| t * (1.0 + TIE_EPSILON)));
+        // A loop, not `array::map` (see `Packet::new`).
+        let mut bounds = hint_t;
+        for b in &mut bounds {
+            *b *= 1.0 + TIE_EPSILON;
+        }
+        ps.windows.reset(bounds);
         let PacketState { windows, last, winners, tlas_stack, blas_stack } = ps;
         match &self.tlas {
             None => {}
@@ -529,10 +535,11 @@ impl CpuBackend {
         use packet::{LANES, LaneBounds};
         let inst = &self.instances[ii];
         let blas = &self.blases[inst.blas as usize];
-        let q = self.instance_packet(inst, p);
-        packet::traverse(&blas.bvh, &q, lanes, stack, windows, |w, i, m| {
+        let moved = self.instance_packet(inst, p);
+        let q = moved.as_ref().unwrap_or(p);
+        packet::traverse(&blas.bvh, q, lanes, stack, windows, |w, i, m| {
             let tmax = packet::load(w.tmax());
-            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], &q, self.near, tmax, m);
+            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], q, self.near, tmax, m);
             if hits != 0 {
                 let t = packet::store(t);
                 for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
@@ -542,21 +549,19 @@ impl CpuBackend {
         });
     }
 
-    /// The packet of `inst`'s BLAS: `p`, or carried into model space lane by lane as
-    /// [`CpuBackend::instance_ray`] carries one ray.
+    /// The packet of `inst`'s BLAS carried into model space lane by lane, as
+    /// [`CpuBackend::instance_ray`] carries one ray; `None` where the BLAS is in world space (the
+    /// packet itself serves: copying its 700 bytes per BLAS and per hint cost more than a node
+    /// test).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> packet::Packet {
-        match &inst.to_model {
-            None => *p,
-            Some(m) => {
-                let mut dirs = p.dirs;
-                for d in &mut dirs {
-                    *d = m.transform_vector3a(*d);
-                }
-                packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes)
-            }
+    fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> Option<packet::Packet> {
+        let m = inst.to_model.as_ref()?;
+        let mut dirs = p.dirs;
+        for d in &mut dirs {
+            *d = m.transform_vector3a(*d);
         }
+        Some(packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes))
     }
 }
