@@ -57,6 +57,12 @@ const TILE: usize = 8;
 /// each [`DovBackend::render_ids`] casts 6·R² rays, in parallel on rayon's pool.
 pub struct CpuBackend {
     cube: CubeMap,
+    /// `u` of each column and `v` of each row of a face as `f32`, as `uv_direction` rounds them
+    /// (the packets' texel directions).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    texel_u: Vec<f32>,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    texel_v: Vec<f32>,
     near: f32,
     tlas: Option<CwBvh>,
     /// In the TLAS's primitive order.
@@ -148,8 +154,13 @@ impl CpuBackend {
                 tlas.primitive_indices.iter().map(|&i| slots[i as usize].take().expect("one leaf each")).collect();
             Some(tlas)
         };
+        let cube = CubeMap::new(resolution);
+        let texel_u = (0..resolution).map(|col| cube.texel_uv(0, col).0 as f32).collect();
+        let texel_v = (0..resolution).map(|row| cube.texel_uv(row, 0).1 as f32).collect();
         Ok(Self {
-            cube: CubeMap::new(resolution),
+            cube,
+            texel_u,
+            texel_v,
             near,
             tlas,
             instances,

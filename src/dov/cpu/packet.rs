@@ -11,10 +11,11 @@
 
 use std::arch::x86_64::*;
 
-use glam::Vec3A;
+use glam::{Affine3A, Vec3A};
 use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 
 use super::bvh::RayTriangle;
+use crate::dov::cubemap::FaceBasis;
 use super::trace::NODE_TMIN;
 
 /// AVX2 registers of `f32` per lane vector.
@@ -30,8 +31,7 @@ pub(super) const PACKET_COLS: usize = 4;
 #[derive(Clone, Copy)]
 pub(super) struct Packet {
     pub origin: Vec3A,
-    /// Each lane's direction, and the same by axis.
-    pub dirs: [Vec3A; LANES],
+    /// Each lane's direction by axis.
     dir: [Lanes; 3],
     /// obvhs's `Ray::inv_direction` of each lane.
     inv: [Lanes; 3],
@@ -43,8 +43,8 @@ pub(super) struct Packet {
 
 impl Packet {
     /// The packet of the rays from `origin` along `dirs` (lanes outside `lanes` are ignored).
+    #[cfg(test)]
     #[target_feature(enable = "avx2")]
-    #[inline]
     pub fn new(origin: Vec3A, dirs: &[Vec3A; LANES], lanes: u32) -> Self {
         let mut d = [[0f32; LANES]; 3];
         for (l, dir) in dirs.iter().enumerate() {
@@ -52,11 +52,18 @@ impl Packet {
                 d[axis][l] = dir[axis];
             }
         }
+        Self::along([load(&d[0]), load(&d[1]), load(&d[2])], origin, lanes)
+    }
+
+    /// The packet of the rays from `origin` along `dir` (by axis; lanes outside `lanes` are
+    /// ignored).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn along(dir: [Lanes; 3], origin: Vec3A, lanes: u32) -> Self {
         // Loops, not `array::map`: the closure `map` calls cannot be inlined into it (it lacks
         // the caller's AVX2), and the call per element cost the packet tracer about a tenth.
-        let (mut dir, mut inverse, mut negative) = ([splat(0.0); 3], [splat(0.0); 3], [0u32; 3]);
+        let (mut inverse, mut negative) = ([splat(0.0); 3], [0u32; 3]);
         for axis in 0..3 {
-            dir[axis] = load(&d[axis]);
             for h in 0..HALVES {
                 // obvhs's `Ray::inv_direction`, eight lanes at a time (was a scalar division each).
                 inverse[axis][h] = safe_inverse(dir[axis][h]);
@@ -65,7 +72,49 @@ impl Packet {
                 negative[axis] |= (_mm256_movemask_ps(below) as u32) << (8 * h);
             }
         }
-        Self { origin, dirs: *dirs, dir, inv: inverse, lanes, negative }
+        Self { origin, dir, inv: inverse, lanes, negative }
+    }
+
+    /// The packet of the texel rays from `origin` through `(u, v)` of face `b`, lane by lane:
+    /// `forward + u·right + v·up`, in [`crate::dov::cubemap::uv_direction`]'s order of operations,
+    /// so each lane's direction is that function's, bit for bit.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn through_face(b: &FaceBasis, u: &[f32; LANES], v: &[f32; LANES], origin: Vec3A, lanes: u32) -> Self {
+        let (u, v) = (load(u), load(v));
+        let mut dir = [splat(0.0); 3];
+        for (axis, d) in dir.iter_mut().enumerate() {
+            let (f, r, up) = (_mm256_set1_ps(b.forward[axis]), _mm256_set1_ps(b.right[axis]), _mm256_set1_ps(b.up[axis]));
+            for h in 0..HALVES {
+                let along_u = _mm256_add_ps(f, _mm256_mul_ps(r, u[h]));
+                d[h] = _mm256_add_ps(along_u, _mm256_mul_ps(up, v[h]));
+            }
+        }
+        Self::along(dir, origin, lanes)
+    }
+
+    /// This packet carried by `m` (world → model space), lane by lane as glam's
+    /// `Affine3A::transform_vector3a` carries one direction (`(x·d.x + y·d.y) + z·d.z`).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn transformed(&self, m: &Affine3A) -> Self {
+        let cols = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis];
+        let mut dir = [splat(0.0); 3];
+        for (axis, d) in dir.iter_mut().enumerate() {
+            for (h, d) in d.iter_mut().enumerate() {
+                let term = |k: usize| _mm256_mul_ps(_mm256_set1_ps(cols[k][axis]), self.dir[k][h]);
+                *d = _mm256_add_ps(_mm256_add_ps(term(0), term(1)), term(2));
+            }
+        }
+        Self::along(dir, m.transform_point3a(self.origin), self.lanes)
+    }
+
+    /// Lane `l`'s direction.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn direction(&self, l: usize) -> Vec3A {
+        let axis = |a: usize| store(self.dir[a])[l];
+        Vec3A::new(axis(0), axis(1), axis(2))
     }
 
     /// obvhs's octant of lane `l` (bit 2: x < 0, bit 1: y < 0, bit 0: z < 0).
@@ -346,6 +395,40 @@ mod tests {
                         prop_assert_eq!(lane_mask, node.intersect_ray(&ray, oct_inv4), "lane {}", l);
                     }
                 }
+            }
+        }
+
+        /// Each lane of a face's packet has `uv_direction`'s direction, and each lane of a carried
+        /// packet `Affine3A::transform_vector3a`'s, bit for bit (the single-ray paths' rays).
+        #[test]
+        fn packet_directions_are_the_single_rays_directions(
+            face in 0usize..6,
+            uv in prop::collection::vec((-1.0f32..1.0, -1.0f32..1.0), LANES),
+            cols in [vec3a(), vec3a(), vec3a(), vec3a()],
+            origin in vec3a(),
+            lanes in 1u32..1 << LANES,
+        ) {
+            if !super::super::wide_instructions() {
+                eprintln!("skipped: no AVX2");
+                return Ok(());
+            }
+            let u: [f32; LANES] = std::array::from_fn(|l| uv[l].0);
+            let v: [f32; LANES] = std::array::from_fn(|l| uv[l].1);
+            let m = Affine3A::from_cols(cols[0], cols[1], cols[2], cols[3]);
+            let basis = crate::dov::cubemap::face_basis(face);
+            // SAFETY: AVX2 is present (checked above).
+            let (p, q) = unsafe {
+                let p = Packet::through_face(&basis, &u, &v, origin, lanes);
+                (p, p.transformed(&m))
+            };
+            prop_assert_eq!(q.origin.to_array().map(f32::to_bits), m.transform_point3a(origin).to_array().map(f32::to_bits));
+            for l in 0..LANES {
+                let d = Vec3A::from(crate::dov::cubemap::uv_direction(face, u[l] as f64, v[l] as f64));
+                // SAFETY: as above.
+                let (got, carried) = unsafe { (p.direction(l), q.direction(l)) };
+                prop_assert_eq!(got.to_array().map(f32::to_bits), d.to_array().map(f32::to_bits), "lane {}", l);
+                let expected = m.transform_vector3a(d).to_array().map(f32::to_bits);
+                prop_assert_eq!(carried.to_array().map(f32::to_bits), expected, "lane {}", l);
             }
         }
 

@@ -435,22 +435,24 @@ impl CpuBackend {
         use packet::{LANES, PACKET_COLS};
         let r = self.cube.resolution() as usize;
         let rows = ids.len() / r;
+        let basis = cubemap::face_basis(face);
         state.packet.last.clear();
         for col0 in (0..r).step_by(TILE) {
             let col1 = (col0 + TILE).min(r);
             for pr in (0..rows).step_by(LANES / PACKET_COLS) {
                 for pc in (col0..col1).step_by(PACKET_COLS) {
                     let texel = |l: usize| (pr + l / PACKET_COLS, pc + l % PACKET_COLS);
-                    let mut dirs = [Vec3A::ZERO; LANES];
+                    let (mut u, mut v) = ([0f32; LANES], [0f32; LANES]);
                     let mut lanes = 0u32;
-                    for (l, dir) in dirs.iter_mut().enumerate() {
+                    for l in 0..LANES {
                         let (row, col) = texel(l);
                         if row < rows && col < col1 {
-                            *dir = self.cube.texel_direction(face, (row0 + row) as u32, col as u32).into();
+                            (u[l], v[l]) = (self.texel_u[col], self.texel_v[row0 + row]);
                             lanes |= 1 << l;
                         }
                     }
-                    let lane_ids = self.trace_packet(&packet::Packet::new(o, &dirs, lanes), state);
+                    let p = packet::Packet::through_face(&basis, &u, &v, o, lanes);
+                    let lane_ids = self.trace_packet(&p, state);
                     for (l, id) in lane_ids.iter().enumerate().filter(|&(l, _)| lanes & (1 << l) != 0) {
                         let (row, col) = texel(l);
                         ids[row * r + col] = *id;
@@ -504,7 +506,7 @@ impl CpuBackend {
                 window.clear();
                 // SAFETY: AVX2 and the rest of `wide_instructions` are present (the only caller
                 // is `trace_band_wide`).
-                unsafe { self.traverse_all_wide(p.origin, p.dirs[l], window) };
+                unsafe { self.traverse_all_wide(p.origin, p.direction(l), window) };
             }
             if let Some(h) = window.winner()
                 && !winners.contains(&(h.instance, h.tri))
@@ -557,11 +559,6 @@ impl CpuBackend {
     #[target_feature(enable = "avx2")]
     #[inline]
     fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> Option<packet::Packet> {
-        let m = inst.to_model.as_ref()?;
-        let mut dirs = p.dirs;
-        for d in &mut dirs {
-            *d = m.transform_vector3a(*d);
-        }
-        Some(packet::Packet::new(m.transform_point3a(p.origin), &dirs, p.lanes))
+        Some(p.transformed(inst.to_model.as_ref()?))
     }
 }
