@@ -435,13 +435,10 @@ async fn walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<R
 
 async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: HeaderMap) -> Result<Response, Reply> {
     let unknown = || Reply::NotFound(format!("no stored LOD '{name}' (mesh URLs come from /query)"));
-    // `{offset}-{crc}.glb`, in exactly the form /query writes it.
-    let (offset, crc) = name.strip_suffix(".glb").and_then(|n| n.split_once('-')).ok_or_else(unknown)?;
-    let offset: u64 = offset.parse().ok().filter(|o: &u64| o.to_string() == offset).ok_or_else(unknown)?;
-    let (lod, stored) = s.lods.get(&offset).map(|l| (l.lod, l.crc)).ok_or_else(unknown)?;
-    if crc != format!("{stored:08x}") {
-        return Err(unknown());
-    }
+    // `{offset}-{crc}.glb`, byte for byte the URL /query writes for that level.
+    let offset: u64 = name.split_once('-').and_then(|(o, _)| o.parse().ok()).ok_or_else(unknown)?;
+    let served = s.lods.get(&offset).filter(|l| l.url.strip_prefix("/mesh/") == Some(&name)).ok_or_else(unknown)?;
+    let (lod, stored) = (served.lod, served.crc);
     let etag = format!("\"{offset:x}-{stored:08x}\"");
     let cache = [(header::ETAG, etag.clone()), (header::CACHE_CONTROL, "public, max-age=31536000, immutable".into())];
     let matches = headers

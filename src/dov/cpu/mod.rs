@@ -238,11 +238,10 @@ impl RayCaster for CpuBackend {
         thread_local! {
             static WINDOW: std::cell::RefCell<TieWindow> = std::cell::RefCell::new(TieWindow::default());
         }
-        let scale = dir.abs().max_element();
-        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir / scale));
+        let (o, d, bound) = texel_scaled(origin, dir, reach);
         WINDOW.with_borrow_mut(|window| {
             window.clear();
-            window.bound = reach * scale;
+            window.bound = bound;
             #[cfg(target_arch = "x86_64")]
             if self.wide {
                 // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
@@ -256,14 +255,7 @@ impl RayCaster for CpuBackend {
 
     /// By the fast path, each ray bounded first by the previous one's nearest triangle.
     fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
-        // As `first_hit` scales each ray, with the same rounding of its bound.
-        let rays: Vec<(Vec3A, Vec3A, f32)> = rays
-            .iter()
-            .map(|&(o, d)| {
-                let scale = d.abs().max_element();
-                (Vec3A::from(o), Vec3A::from(d / scale), reach * scale)
-            })
-            .collect();
+        let rays: Vec<(Vec3A, Vec3A, f32)> = rays.iter().map(|&(o, d)| texel_scaled(o, d, reach)).collect();
         #[cfg(target_arch = "x86_64")]
         if self.wide {
             // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
@@ -309,6 +301,14 @@ fn world_chunks(scene: &Scene, mut world: Vec<usize>, max: u64) -> Vec<Vec<usize
         chunks.last_mut().expect("pushed above").push(i);
     }
     chunks
+}
+
+/// A ray for the fast path's traversal: `dir` scaled so that its largest component is ±1, the
+/// texel directions' convention (so that the near plane means the same distance), and `reach`
+/// in units of the scaled direction.
+fn texel_scaled(origin: Vec3, dir: Vec3, reach: f32) -> (Vec3A, Vec3A, f32) {
+    let scale = dir.abs().max_element();
+    (Vec3A::from(origin), Vec3A::from(dir / scale), reach * scale)
 }
 
 /// Whether this CPU runs [`CpuBackend::trace_band_wide`] (x86-64 with AVX2, FMA, BMI1/2, LZCNT and
