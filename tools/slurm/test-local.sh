@@ -180,6 +180,11 @@ for _ in $(seq 300); do
   sleep 0.1
 done
 ! pgrep -f "slurmstepd: \[$RAW\." >/dev/null || fail "the cancelled run of task $VICTIM did not end"
+# And only in a later second than the requeue: slurmd rejects a launch whose credential is not
+# newer than the job's revocation (`cred->ctime <= j->revoked` in slurm_cred.c, both whole
+# seconds), so a restart within the same second was killed ("Job credential revoked") even after
+# the step daemon had gone (CI, 2026-12-02: released 0.1 s after the requeue).
+sleep 2
 scontrol update JobId="${ARRAY}_${VICTIM}" StartTime=now || fail "could not release the requeued task"
 echo "slurm: task $VICTIM cancelled while running and requeued"
 
