@@ -508,12 +508,11 @@ impl CpuBackend {
                 // is `trace_band_wide`).
                 unsafe { self.traverse_all_wide(p.origin, p.direction(l), window) };
             }
-            if let Some(h) = window.winner()
-                && !winners.contains(&(h.instance, h.tri))
-            {
+            let Some(h) = window.winner() else { continue };
+            if !winners.contains(&(h.instance, h.tri)) {
                 winners.push((h.instance, h.tri));
             }
-            ids[l] = window.id();
+            ids[l] = h.id();
         }
         // A packet of misses keeps the last hits: the next packet may well hit them.
         if !winners.is_empty() {
