@@ -255,9 +255,9 @@ fn gpu_instances_draw_like_baked_world_meshes_texel_for_texel() {
                 // common, sometimes to neither of the two triangles sharing it, so the object's
                 // inside shows through: 6 texels of a row of the instanced drawing at (−3, 5, 2.5),
                 // 1 of the baked one at (−6, 9, 6) with LODs. The driver's fill rule, then, not
-                // instancing (the baked drawing has it too); on GL
-                // only, such texels (same object, only the back-face bit differs) may differ,
-                // at most 1 in 5,000. Any other difference fails everywhere.
+                // instancing (the baked drawing has it too); on GL only, such texels (same
+                // object, only the back-face bit differs) may differ, at most 1 in 5,000. Any
+                // other difference fails everywhere.
                 let gl = draws_through_gl(backend);
                 let tie = |&i: &usize| gl && (got.ids[i] ^ expected.ids[i]) == BACK_FACE_BIT;
                 let ties = differ.iter().filter(|i| tie(i)).count();

@@ -58,7 +58,8 @@ const TILE: usize = 8;
 pub struct CpuBackend {
     cube: CubeMap,
     /// `u` of each column and `v` of each row of a face as `f32`, as `uv_direction` rounds them
-    /// (the packets' texel directions).
+    /// (the packets' texel directions; converting the cube map's `f64` per lane instead made
+    /// the packets 7 % slower: 11.0 against 10.3 ms per point, `ray-speed` on the engine).
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     texel_u: Vec<f32>,
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]

@@ -484,7 +484,7 @@ impl CpuBackend {
                 hint_t[l] = hint_t[l].min(t[l]);
             }
         }
-        // A loop, not `array::map` (see `Packet::new`).
+        // A loop, not `array::map` (see `Packet::along`).
         let mut bounds = hint_t;
         for b in &mut bounds {
             *b *= 1.0 + TIE_EPSILON;
