@@ -3,7 +3,9 @@
 //! registers of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63).
 //!
 //! A node is fetched and its children's quantised bounds converted once for the sixteen rays, and
-//! the stack holds one entry per node for all of them. Each lane does obvhs's own box test and
+//! the stack holds one entry per node for all of them. One test of the eight children for the
+//! whole packet first rules out those no lane can enter (exactly: see [`enter_children`]); on
+//! the others each lane does obvhs's own box test, and on each triangle
 //! [`RayTriangle::intersect`]'s arithmetic, operation for operation (the same products, sums,
 //! min/max operand order and comparisons), with its own `tmax`, so a ray enters exactly the boxes
 //! and hits exactly the triangles its own traversal would (tested lane against single ray): only
@@ -26,6 +28,7 @@ pub(super) const LANES: usize = 8 * HALVES;
 pub(super) type Lanes = [__m256; HALVES];
 /// A packet's texels: `PACKET_COLS` columns of `LANES / PACKET_COLS` rows, lane `row · COLS + col`.
 pub(super) const PACKET_COLS: usize = 4;
+pub(super) const PACKET_ROWS: usize = LANES / PACKET_COLS;
 
 /// [`LANES`] rays from one origin in one BVH's space, lane by lane.
 #[derive(Clone, Copy)]
@@ -223,65 +226,156 @@ pub(super) fn intersect_triangle(
     (hits & lanes, ts, back)
 }
 
-/// For each child slot of `node`, the lanes of `lanes` (all of octant `oct`) that enter it:
-/// obvhs's `intersect_ray_simd` per lane, with each lane's `tmax`.
+/// The range of one octant group's inverse directions on each axis: the least and the greatest
+/// over its lanes.
+#[derive(Clone, Copy)]
+struct InverseRange {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl InverseRange {
+    /// The range over the lanes `lanes` of `p` (not empty).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn of(p: &Packet, lanes: u32) -> Self {
+        let (mut lo, mut hi) = ([0f32; 3], [0f32; 3]);
+        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let (inf, neg_inf) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
+        for axis in 0..3 {
+            let (mut min, mut max) = (inf, neg_inf);
+            for h in 0..HALVES {
+                let word = _mm256_set1_epi32(((lanes >> (8 * h)) & 0xff) as i32);
+                let used = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(word, bits), bits));
+                min = _mm256_min_ps(min, _mm256_blendv_ps(inf, p.inv[axis][h], used));
+                max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, p.inv[axis][h], used));
+            }
+            (lo[axis], hi[axis]) = (horizontal_min(min), -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), max)));
+        }
+        Self { lo, hi }
+    }
+}
+
+/// The least of the eight lanes of `v`.
 #[target_feature(enable = "avx2")]
 #[inline]
-fn enter_children(node: &CwBvhNode, p: &Packet, oct: u32, tmax: Lanes, lanes: u32) -> [u32; 8] {
-    {
-        let e = node.compute_extent();
-        let o = Vec3A::from(node.p) - p.origin;
-        // SAFETY: reads the 8 bytes of `b`.
-        let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(b.as_ptr().cast()) }));
-        let mut near = [[0f32; 8]; 3];
-        let mut far = [[0f32; 8]; 3];
-        let bounds = [
-            (&node.child_min_x, &node.child_max_x),
-            (&node.child_min_y, &node.child_max_y),
-            (&node.child_min_z, &node.child_max_z),
-        ];
-        let mut adj_dir = [[_mm256_setzero_ps(); HALVES]; 3];
-        let mut adj_origin = [[_mm256_setzero_ps(); HALVES]; 3];
-        for axis in 0..3 {
-            let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
-            // One octant: the near plane is the same side for every lane.
-            let (n, f) = if oct & (4 >> axis) != 0 { (hi, lo) } else { (lo, hi) };
-            // SAFETY: each store writes 8 f32 into an array of 8.
-            unsafe {
-                _mm256_storeu_ps(near[axis].as_mut_ptr(), n);
-                _mm256_storeu_ps(far[axis].as_mut_ptr(), f);
-            }
-            // obvhs: extent · inv_direction and (p − origin) · inv_direction.
-            for h in 0..HALVES {
-                adj_dir[axis][h] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis][h]);
-                adj_origin[axis][h] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis][h]);
-            }
+fn horizontal_min(v: __m256) -> f32 {
+    let m = _mm256_min_ps(v, _mm256_permute2f128_ps::<1>(v, v));
+    let m = _mm256_min_ps(m, _mm256_shuffle_ps::<0b01_00_11_10>(m, m));
+    let m = _mm256_min_ps(m, _mm256_shuffle_ps::<0b10_11_00_01>(m, m));
+    _mm256_cvtss_f32(m)
+}
+
+/// For each child slot of `node`, the lanes of `lanes` (all of octant `oct`, their inverse
+/// directions within `range`) that enter it: obvhs's `intersect_ray_simd` per lane, with each
+/// lane's `tmax`.
+///
+/// First one test of all eight children for the whole group, which rules out exactly the
+/// children no lane can enter, and the per-lane test only on the others (about 1.3 of 7.9
+/// children a lane group enters, on the engine). The group test needs no widening: each plane
+/// distance `q·(e·inv) + (p − origin)·inv` is a chain of rounded products and sums, and rounding
+/// is monotone, so with `q ≥ 0` and `e ≥ 0` it lies between the same chain at the range's ends
+/// (for `p − origin < 0` with the ends swapped); max and min are exact, so a lane's entry and
+/// exit lie inside the group's, and a child the group test rules out no lane enters.
+#[target_feature(enable = "avx2")]
+#[inline]
+fn enter_children(
+    node: &CwBvhNode,
+    p: &Packet,
+    oct: u32,
+    range: &InverseRange,
+    tmax: Lanes,
+    lanes: u32,
+) -> ([u32; 8], u32) {
+    let e = node.compute_extent();
+    let o = Vec3A::from(node.p) - p.origin;
+    // SAFETY: reads the 8 bytes of `b`.
+    let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(b.as_ptr().cast()) }));
+    let mut near = [[0f32; 8]; 3];
+    let mut far = [[0f32; 8]; 3];
+    let bounds = [
+        (&node.child_min_x, &node.child_max_x),
+        (&node.child_min_y, &node.child_max_y),
+        (&node.child_min_z, &node.child_max_z),
+    ];
+    let widest = -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), _mm256_max_ps(tmax[0], tmax[1])));
+    let (mut group_t0, mut group_t1) = (_mm256_set1_ps(NODE_TMIN), _mm256_set1_ps(widest));
+    for axis in 0..3 {
+        let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
+        // One octant: the near plane is the same side for every lane.
+        let (n, f) = if oct & (4 >> axis) != 0 { (hi, lo) } else { (lo, hi) };
+        // SAFETY: each store writes 8 f32 into an array of 8.
+        unsafe {
+            _mm256_storeu_ps(near[axis].as_mut_ptr(), n);
+            _mm256_storeu_ps(far[axis].as_mut_ptr(), f);
         }
-        let plane = |q: f32, axis: usize, h: usize| {
-            _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis][h]), adj_origin[axis][h])
-        };
-        let mut entered = [0u32; 8];
-        for (slot, lanes_in) in entered.iter_mut().enumerate() {
-            if node.child_meta[slot] == 0 {
-                continue;
-            }
-            for (h, tmax) in tmax.iter().enumerate() {
-                let tmin_x = plane(near[0][slot], 0, h);
-                let tmin_y = plane(near[1][slot], 1, h);
-                let tmin_z = plane(near[2][slot], 2, h);
-                let tmax_x = plane(far[0][slot], 0, h);
-                let tmax_y = plane(far[1][slot], 1, h);
-                let tmax_z = plane(far[2][slot], 2, h);
-                let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
-                let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
-                let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
-                let t1 = _mm256_min_ps(t1, *tmax);
-                *lanes_in |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32) << (8 * h);
-            }
-            *lanes_in &= lanes;
-        }
-        entered
+        let (inv_lo, inv_hi) = (range.lo[axis], range.hi[axis]);
+        let (o_lo, o_hi) = if o[axis] >= 0.0 { (o[axis] * inv_lo, o[axis] * inv_hi) } else { (o[axis] * inv_hi, o[axis] * inv_lo) };
+        let plane = |q, inv: f32, o: f32| _mm256_add_ps(_mm256_mul_ps(q, _mm256_set1_ps(e[axis] * inv)), _mm256_set1_ps(o));
+        group_t0 = _mm256_max_ps(group_t0, plane(n, inv_lo, o_lo));
+        group_t1 = _mm256_min_ps(group_t1, plane(f, inv_hi, o_hi));
     }
+    // The slots in use: those whose meta byte is not 0.
+    // SAFETY: reads the 8 bytes of `child_meta`.
+    let meta = unsafe { _mm_loadl_epi64(node.child_meta.as_ptr().cast()) };
+    let used = !(_mm_movemask_epi8(_mm_cmpeq_epi8(meta, _mm_setzero_si128())) as u32) & 0xff;
+    let maybe = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(group_t0, group_t1)) as u32 & used;
+    let mut entered = [0u32; 8];
+    if maybe == 0 {
+        return (entered, 0);
+    }
+    // Eight lanes at a time, over the children the group may enter.
+    for (h, tmax) in tmax.iter().enumerate() {
+        // obvhs: extent · inv_direction and (p − origin) · inv_direction.
+        let mut adj_dir = [_mm256_setzero_ps(); 3];
+        let mut adj_origin = [_mm256_setzero_ps(); 3];
+        for axis in 0..3 {
+            adj_dir[axis] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis][h]);
+            adj_origin[axis] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis][h]);
+        }
+        let plane = |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
+        let mut left = maybe;
+        while left != 0 {
+            let slot = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let tmin_x = plane(near[0][slot], 0);
+            let tmin_y = plane(near[1][slot], 1);
+            let tmin_z = plane(near[2][slot], 2);
+            let tmax_x = plane(far[0][slot], 0);
+            let tmax_y = plane(far[1][slot], 1);
+            let tmax_z = plane(far[2][slot], 2);
+            let t0 = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
+            let t1 = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
+            let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_TMIN));
+            let t1 = _mm256_min_ps(t1, *tmax);
+            entered[slot] |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32) << (8 * h);
+        }
+    }
+    let mut slots = 0;
+    let mut left = maybe;
+    while left != 0 {
+        let slot = left.trailing_zeros() as usize;
+        left &= left - 1;
+        entered[slot] &= lanes;
+        slots |= u32::from(entered[slot] != 0) << slot;
+    }
+    (entered, slots)
+}
+
+/// The eight bits of `slots` reordered so that bit `k` is bit `k ^ oct`: swapping neighbours,
+/// pairs and nibbles for the octant's three bits.
+#[inline(always)]
+fn xor_permuted(mut slots: u32, oct: u32) -> u32 {
+    if oct & 1 != 0 {
+        slots = (slots & 0x55) << 1 | (slots & 0xaa) >> 1;
+    }
+    if oct & 2 != 0 {
+        slots = (slots & 0x33) << 2 | (slots & 0xcc) >> 2;
+    }
+    if oct & 4 != 0 {
+        slots = (slots & 0x0f) << 4 | (slots & 0xf0) >> 4;
+    }
+    slots
 }
 
 /// Where a packet traversal keeps its per-lane bounds: `tmax` of each lane, read at every node.
@@ -306,28 +400,32 @@ pub(super) fn traverse<B: LaneBounds>(
     while left != 0 {
         let (oct, group) = p.octant_group(left);
         left &= !group;
+        let range = InverseRange::of(p, group);
         stack.clear();
         stack.push((0, group));
         while let Some((index, lanes)) = stack.pop() {
             let node = &bvh.nodes[index as usize];
-            let entered = enter_children(node, p, oct, load(bounds.tmax()), lanes);
-            // obvhs's build puts children in slots so that slot ^ octant runs near to far.
-            for k in (0..8u32).rev() {
+            let (entered, slots) = enter_children(node, p, oct, &range, load(bounds.tmax()), lanes);
+            // obvhs's build puts children in slots so that slot ^ octant runs near to far: bit k
+            // of `order` is slot k ^ octant's.
+            let order = |slots: u32| xor_permuted(slots, oct);
+            let inner = slots & node.imask as u32;
+            // Far to near onto the stack, so the nearest comes off first.
+            let mut far_first = order(inner);
+            while far_first != 0 {
+                let k = 31 - far_first.leading_zeros();
+                far_first &= !(1 << k);
                 let slot = (k ^ oct) as usize;
-                let m = entered[slot];
-                if m != 0 && !node.is_leaf(slot) {
-                    let before = node.imask as u32 & ((1u32 << slot) - 1);
-                    stack.push((node.child_base_idx + before.count_ones(), m));
-                }
+                let before = node.imask as u32 & ((1u32 << slot) - 1);
+                stack.push((node.child_base_idx + before.count_ones(), entered[slot]));
             }
-            for k in 0..8u32 {
-                let slot = (k ^ oct) as usize;
-                let m = entered[slot];
-                if m != 0 && node.is_leaf(slot) {
-                    let (first, count) = node.child_primitives(slot);
-                    for i in first..first + count {
-                        leaf(bounds, i as usize, m);
-                    }
+            let mut near_first = order(slots & !inner);
+            while near_first != 0 {
+                let slot = (near_first.trailing_zeros() ^ oct) as usize;
+                near_first &= near_first - 1;
+                let (first, count) = node.child_primitives(slot);
+                for i in first..first + count {
+                    leaf(bounds, i as usize, entered[slot]);
                 }
             }
         }
@@ -360,6 +458,17 @@ mod tests {
         (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..1 << LANES)
     }
 
+    /// Bit `k` of the reordered slots is bit `k ^ oct` of the slots, for every octant and set.
+    #[test]
+    fn xor_permuted_moves_bit_k_xor_oct_to_k() {
+        for oct in 0..8 {
+            for slots in 0..256u32 {
+                let expected = (0..8).fold(0, |m, k| m | ((slots >> (k ^ oct)) & 1) << k);
+                assert_eq!(xor_permuted(slots, oct), expected, "oct {oct}, slots {slots:#010b}");
+            }
+        }
+    }
+
     proptest! {
         /// Every lane enters the children obvhs's own box test lets its ray enter, whatever the
         /// packet's other lanes: the hit mask rebuilt from the lanes' per-child masks is
@@ -384,7 +493,10 @@ mod tests {
                     let (oct, group) = p.octant_group(left);
                     left &= !group;
                     // SAFETY: as above.
-                    let entered = unsafe { enter_children(node, &p, oct, load(&tmax), group) };
+                    let (entered, slots) =
+                        unsafe { enter_children(node, &p, oct, &InverseRange::of(&p, group), load(&tmax), group) };
+                    let nonzero = (0..8).fold(0, |m, slot| m | u32::from(entered[slot] != 0) << slot);
+                    prop_assert_eq!(slots, nonzero, "entered slots");
                     for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
                         let ray = Ray::new(origin, dirs[l], 0.0, tmax[l]);
                         let oct_inv4 = bvh.new_traversal(dirs[l]).oct_inv4;

@@ -39,29 +39,36 @@ pub(super) struct PacketState {
     blas_stack: Vec<(u32, u32)>,
 }
 
-/// One tie window per lane of a packet, and their bounds side by side (the lanes' `tmax`).
+/// One tie window per lane of a packet, and their bounds side by side (the lanes' `tmax`). A
+/// window is emptied when its lane's first hit arrives, not for every packet: most lanes of most
+/// packets hit nothing.
 #[cfg(target_arch = "x86_64")]
 #[derive(Default)]
 pub(super) struct LaneWindows {
     windows: [TieWindow; packet::LANES],
     bounds: [f32; packet::LANES],
+    /// The lanes whose windows hold this packet's hits (the others' are stale).
+    filled: u32,
 }
 
 #[cfg(target_arch = "x86_64")]
 impl LaneWindows {
     /// Empties every window, with the bound `bounds[l]` on lane `l`.
     fn reset(&mut self, bounds: [f32; packet::LANES]) {
-        for (w, &b) in self.windows.iter_mut().zip(&bounds) {
-            w.clear();
-            w.bound = b;
-        }
         self.bounds = bounds;
+        self.filled = 0;
     }
 
     #[inline(always)]
     pub(super) fn add(&mut self, lane: usize, hit: Hit) {
-        self.windows[lane].add(hit);
-        self.bounds[lane] = self.windows[lane].bound;
+        let window = &mut self.windows[lane];
+        if self.filled & (1 << lane) == 0 {
+            self.filled |= 1 << lane;
+            window.clear();
+            window.bound = self.bounds[lane];
+        }
+        window.add(hit);
+        self.bounds[lane] = window.bound;
     }
 }
 
@@ -432,30 +439,46 @@ impl CpuBackend {
     #[target_feature(enable = "avx2")]
     #[inline]
     fn trace_band_packets(&self, o: Vec3A, face: usize, row0: usize, ids: &mut [u32], state: &mut TexelState) {
-        use packet::{LANES, PACKET_COLS};
+        use packet::{LANES, PACKET_COLS, PACKET_ROWS};
         let r = self.cube.resolution() as usize;
         let rows = ids.len() / r;
         let basis = cubemap::face_basis(face);
         state.packet.last.clear();
         for col0 in (0..r).step_by(TILE) {
             let col1 = (col0 + TILE).min(r);
-            for pr in (0..rows).step_by(LANES / PACKET_COLS) {
+            for pr in (0..rows).step_by(PACKET_ROWS) {
                 for pc in (col0..col1).step_by(PACKET_COLS) {
                     let texel = |l: usize| (pr + l / PACKET_COLS, pc + l % PACKET_COLS);
                     let (mut u, mut v) = ([0f32; LANES], [0f32; LANES]);
+                    // Whole blocks (all but the image's edges) row by row, the rest texel by texel.
+                    let whole = pr + PACKET_ROWS <= rows && pc + PACKET_COLS <= col1;
                     let mut lanes = 0u32;
-                    for l in 0..LANES {
-                        let (row, col) = texel(l);
-                        if row < rows && col < col1 {
-                            (u[l], v[l]) = (self.texel_u[col], self.texel_v[row0 + row]);
-                            lanes |= 1 << l;
+                    if whole {
+                        for (i, (u, v)) in u.chunks_exact_mut(PACKET_COLS).zip(v.chunks_exact_mut(PACKET_COLS)).enumerate() {
+                            u.copy_from_slice(&self.texel_u[pc..pc + PACKET_COLS]);
+                            v.fill(self.texel_v[row0 + pr + i]);
+                        }
+                        lanes = u32::MAX >> (32 - LANES);
+                    } else {
+                        for l in 0..LANES {
+                            let (row, col) = texel(l);
+                            if row < rows && col < col1 {
+                                (u[l], v[l]) = (self.texel_u[col], self.texel_v[row0 + row]);
+                                lanes |= 1 << l;
+                            }
                         }
                     }
                     let p = packet::Packet::through_face(&basis, &u, &v, o, lanes);
                     let lane_ids = self.trace_packet(&p, state);
-                    for (l, id) in lane_ids.iter().enumerate().filter(|&(l, _)| lanes & (1 << l) != 0) {
-                        let (row, col) = texel(l);
-                        ids[row * r + col] = *id;
+                    if whole {
+                        for (i, row_ids) in lane_ids.chunks_exact(PACKET_COLS).enumerate() {
+                            ids[(pr + i) * r + pc..][..PACKET_COLS].copy_from_slice(row_ids);
+                        }
+                    } else {
+                        for (l, id) in lane_ids.iter().enumerate().filter(|&(l, _)| lanes & (1 << l) != 0) {
+                            let (row, col) = texel(l);
+                            ids[row * r + col] = *id;
+                        }
                     }
                 }
             }
@@ -473,6 +496,8 @@ impl CpuBackend {
         use packet::LANES;
         let ps = &mut state.packet;
         let mut hint_t = [f32::INFINITY; LANES];
+        // The lanes some hint triangle bounds.
+        let mut hinted = 0u32;
         for &(ii, i) in &ps.last {
             let inst = &self.instances[ii as usize];
             let moved = self.instance_packet(inst, p);
@@ -480,6 +505,7 @@ impl CpuBackend {
             let tri = &self.blases[inst.blas as usize].triangles[i as usize];
             let (hits, t, _) = packet::intersect_triangle(tri, q, self.near, packet::splat(f32::INFINITY), p.lanes);
             let t = packet::store(t);
+            hinted |= hits;
             for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
                 hint_t[l] = hint_t[l].min(t[l]);
             }
@@ -500,8 +526,15 @@ impl CpuBackend {
         }
         let mut ids = [NO_OBJECT; LANES];
         winners.clear();
-        for l in (0..LANES).filter(|l| p.lanes & (1 << l) != 0) {
+        // Lanes with neither a hit nor a hint saw nothing.
+        let mut left = (windows.filled | hinted) & p.lanes;
+        while left != 0 {
+            let l = left.trailing_zeros() as usize;
+            left &= left - 1;
             let window = &mut windows.windows[l];
+            if windows.filled & (1 << l) == 0 {
+                window.clear();
+            }
             if window.t_near > hint_t[l] {
                 window.clear();
                 // SAFETY: AVX2 and the rest of `wide_instructions` are present (the only caller

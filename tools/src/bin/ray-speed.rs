@@ -6,8 +6,9 @@
 //! `render_ids_reference` (one `trace` per texel: the straightforward tracer), and `render_ids` (the
 //! fast path, in a 1-thread rayon pool) twice: one ray at a time (`set_packets(false)`, the
 //! previous fast path) and by packets of 4 × 4 rays (the default); each id cube must equal the
-//! reference's. Times are the process's CPU time (one thread busy at a time), steadier than the
-//! wall clock on a shared machine.
+//! reference's. Each tracer is timed in its own pass over all the points (packets first), as
+//! Embree's harness times its modes. Times are the process's CPU time (one thread busy at a
+//! time), steadier than the wall clock on a shared machine.
 //!
 //! Writes into OUT_DIR: `triangles.f32` (world triangles, 9 f32 each, the order of
 //! `world_triangles`), `objects.u32` (each triangle's object), `points.f32` (3 f32 per point),
@@ -62,22 +63,36 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let mut ids_file = std::io::BufWriter::new(std::fs::File::create(out_dir.join("ids.u32"))?);
     let (mut reference, mut per_ray, mut fast) = (IdCube::new(r), IdCube::new(r), IdCube::new(r));
-    // CPU time of this process (the one busy thread), and wall time beside it, per tracer.
-    let (mut t_reference, mut t_per_ray, mut t_fast) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
-    let (mut wall_reference, mut wall_per_ray, mut wall_fast) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
+    // Each tracer is timed in a pass of its own over all the points, as the Embree harness times
+    // each of its modes (interleaved, each found the caches full of the others' data).
+    let mut timed = |packets: bool, ids: &mut IdCube| -> Result<(Duration, Duration), Box<dyn std::error::Error>> {
+        backend.set_packets(packets);
+        // CPU time of this process (the one busy thread), and wall time beside it.
+        let (mut cpu, mut wall) = (Duration::ZERO, Duration::ZERO);
+        for &p in &points {
+            let (t, c) = (Instant::now(), process_cpu_time());
+            pool.install(|| backend.render_ids(p, ids))?;
+            (wall, cpu) = (wall + t.elapsed(), cpu + (process_cpu_time() - c));
+            if packets {
+                ids_file.write_all(&ids.ids.iter().flat_map(|id| id.to_le_bytes()).collect::<Vec<_>>())?;
+            }
+        }
+        Ok((cpu, wall))
+    };
+    let (t_fast, wall_fast) = timed(true, &mut fast)?;
+    let (t_per_ray, wall_per_ray) = timed(false, &mut per_ray)?;
+    ids_file.flush()?;
+    let (mut t_reference, mut wall_reference) = (Duration::ZERO, Duration::ZERO);
     let (mut differing, mut ties) = (0usize, 0usize);
     for &p in &points {
         let (t, c) = (Instant::now(), process_cpu_time());
         backend.render_ids_reference(p, &mut reference)?;
         (wall_reference, t_reference) = (wall_reference + t.elapsed(), t_reference + (process_cpu_time() - c));
-        backend.set_packets(false);
-        let (t, c) = (Instant::now(), process_cpu_time());
-        pool.install(|| backend.render_ids(p, &mut per_ray))?;
-        (wall_per_ray, t_per_ray) = (wall_per_ray + t.elapsed(), t_per_ray + (process_cpu_time() - c));
-        backend.set_packets(true);
-        let (t, c) = (Instant::now(), process_cpu_time());
-        pool.install(|| backend.render_ids(p, &mut fast))?;
-        (wall_fast, t_fast) = (wall_fast + t.elapsed(), t_fast + (process_cpu_time() - c));
+        // Both fast routes again, untimed, to compare texel by texel.
+        for (packets, ids) in [(false, &mut per_ray), (true, &mut fast)] {
+            backend.set_packets(packets);
+            pool.install(|| backend.render_ids(p, ids))?;
+        }
         // A difference is allowed only on a tie up to rounding: both ids among the surfaces at
         // the nearest depth (`CpuBackend::surfaces_at_nearest`).
         for cube_ids in [&per_ray, &fast] {
@@ -91,9 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
             }
         }
-        ids_file.write_all(&fast.ids.iter().flat_map(|id| id.to_le_bytes()).collect::<Vec<_>>())?;
     }
-    ids_file.flush()?;
 
     let n = points.len() as f64;
     let rays = 6.0 * f64::from(r) * f64::from(r);
