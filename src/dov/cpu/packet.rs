@@ -83,8 +83,7 @@ impl Packet {
     /// so each lane's direction is that function's, bit for bit.
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub fn through_face(b: &FaceBasis, u: &[f32; LANES], v: &[f32; LANES], origin: Vec3A, lanes: u32) -> Self {
-        let (u, v) = (load(u), load(v));
+    pub fn through_face(b: &FaceBasis, u: Lanes, v: Lanes, origin: Vec3A, lanes: u32) -> Self {
         let mut dir = [splat(0.0); 3];
         for (axis, d) in dir.iter_mut().enumerate() {
             let (f, r, up) = (_mm256_set1_ps(b.forward[axis]), _mm256_set1_ps(b.right[axis]), _mm256_set1_ps(b.up[axis]));
@@ -94,6 +93,19 @@ impl Packet {
             }
         }
         Self::along(dir, origin, lanes)
+    }
+
+    /// The texel coordinates of a whole block: `u` of its [`PACKET_COLS`] columns, `v` of its
+    /// [`PACKET_ROWS`] rows, lane `row · PACKET_COLS + col`; made in registers, as stores of four
+    /// bytes read back as thirty-two would stall.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn block_uv(u: &[f32; PACKET_COLS], v: &[f32; PACKET_ROWS]) -> (Lanes, Lanes) {
+        // SAFETY: reads the four f32 of `u`.
+        let u4 = unsafe { _mm_loadu_ps(u.as_ptr()) };
+        let u8 = _mm256_set_m128(u4, u4);
+        let rows = |a: f32, b: f32| _mm256_set_m128(_mm_set1_ps(b), _mm_set1_ps(a));
+        ([u8; HALVES], [rows(v[0], v[1]), rows(v[2], v[3])])
     }
 
     /// This packet carried by `m` (world → model space), lane by lane as glam's
@@ -173,6 +185,52 @@ pub(super) fn store(v: Lanes) -> [f32; LANES] {
     a
 }
 
+/// All bits set in the lanes of `lanes`, clear in the others (a blend mask).
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn lane_mask(lanes: u32) -> Lanes {
+    let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let mut m = [_mm256_setzero_ps(); HALVES];
+    for (h, m) in m.iter_mut().enumerate() {
+        let word = _mm256_set1_epi32(((lanes >> (8 * h)) & 0xff) as i32);
+        *m = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(word, bits), bits));
+    }
+    m
+}
+
+/// In the lanes of `mask`, the lesser of `a` and `b`; `a` in the others.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn min_where(a: Lanes, b: Lanes, mask: Lanes) -> Lanes {
+    let mut v = a;
+    for h in 0..HALVES {
+        v[h] = _mm256_blendv_ps(a[h], _mm256_min_ps(a[h], b[h]), mask[h]);
+    }
+    v
+}
+
+/// In the lanes of `mask`, `b`; `a` in the others.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn select(a: Lanes, b: Lanes, mask: Lanes) -> Lanes {
+    let mut v = a;
+    for h in 0..HALVES {
+        v[h] = _mm256_blendv_ps(a[h], b[h], mask[h]);
+    }
+    v
+}
+
+/// Each lane of `v` times `k`.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn scaled(v: Lanes, k: f32) -> Lanes {
+    let mut out = v;
+    for h in 0..HALVES {
+        out[h] = _mm256_mul_ps(v[h], _mm256_set1_ps(k));
+    }
+    out
+}
+
 /// `v` in every lane.
 #[target_feature(enable = "avx2")]
 #[inline]
@@ -240,15 +298,13 @@ impl InverseRange {
     #[inline]
     fn of(p: &Packet, lanes: u32) -> Self {
         let (mut lo, mut hi) = ([0f32; 3], [0f32; 3]);
-        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let used = lane_mask(lanes);
         let (inf, neg_inf) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
         for axis in 0..3 {
             let (mut min, mut max) = (inf, neg_inf);
-            for h in 0..HALVES {
-                let word = _mm256_set1_epi32(((lanes >> (8 * h)) & 0xff) as i32);
-                let used = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(word, bits), bits));
-                min = _mm256_min_ps(min, _mm256_blendv_ps(inf, p.inv[axis][h], used));
-                max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, p.inv[axis][h], used));
+            for (inv, used) in p.inv[axis].iter().zip(&used) {
+                min = _mm256_min_ps(min, _mm256_blendv_ps(inf, *inv, *used));
+                max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, *inv, *used));
             }
             (lo[axis], hi[axis]) = (horizontal_min(min), -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), max)));
         }
@@ -378,9 +434,11 @@ fn xor_permuted(mut slots: u32, oct: u32) -> u32 {
     slots
 }
 
-/// Where a packet traversal keeps its per-lane bounds: `tmax` of each lane, read at every node.
+/// Where a packet traversal keeps its per-lane bounds: `tmax` of each lane, read at every node
+/// (in registers: written lane by lane and read back whole, they would stall on every node, as
+/// a store of four bytes cannot forward to a load of thirty-two).
 pub(super) trait LaneBounds {
-    fn tmax(&self) -> &[f32; LANES];
+    fn tmax(&self) -> Lanes;
 }
 
 /// Traverses `bvh` with the lanes `lanes` of `p`, nearest children first: `leaf(bounds, primitive
@@ -405,7 +463,7 @@ pub(super) fn traverse<B: LaneBounds>(
         stack.push((0, group));
         while let Some((index, lanes)) = stack.pop() {
             let node = &bvh.nodes[index as usize];
-            let (entered, slots) = enter_children(node, p, oct, &range, load(bounds.tmax()), lanes);
+            let (entered, slots) = enter_children(node, p, oct, &range, bounds.tmax(), lanes);
             // obvhs's build puts children in slots so that slot ^ octant runs near to far: bit k
             // of `order` is slot k ^ octant's.
             let order = |slots: u32| xor_permuted(slots, oct);
@@ -466,6 +524,25 @@ mod tests {
                 let expected = (0..8).fold(0, |m, k| m | ((slots >> (k ^ oct)) & 1) << k);
                 assert_eq!(xor_permuted(slots, oct), expected, "oct {oct}, slots {slots:#010b}");
             }
+        }
+    }
+
+    /// A whole block's coordinates: lane `row · PACKET_COLS + col` has the column's `u` and the
+    /// row's `v`.
+    #[test]
+    fn block_uv_lays_out_columns_and_rows() {
+        if !super::super::wide_instructions() {
+            eprintln!("skipped: no AVX2");
+            return;
+        }
+        let (u, v) = ([0.5, -0.25, 1.0, 3.0], [7.0, -8.0, 9.5, 0.125]);
+        // SAFETY: AVX2 is present (checked above).
+        let (lu, lv) = unsafe {
+            let (lu, lv) = Packet::block_uv(&u, &v);
+            (store(lu), store(lv))
+        };
+        for l in 0..LANES {
+            assert_eq!((lu[l], lv[l]), (u[l % PACKET_COLS], v[l / PACKET_COLS]), "lane {l}");
         }
     }
 
@@ -530,7 +607,7 @@ mod tests {
             let basis = crate::dov::cubemap::face_basis(face);
             // SAFETY: AVX2 is present (checked above).
             let (p, q) = unsafe {
-                let p = Packet::through_face(&basis, &u, &v, origin, lanes);
+                let p = Packet::through_face(&basis, load(&u), load(&v), origin, lanes);
                 (p, p.transformed(&m))
             };
             prop_assert_eq!(q.origin.to_array().map(f32::to_bits), m.transform_point3a(origin).to_array().map(f32::to_bits));

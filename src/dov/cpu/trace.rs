@@ -43,40 +43,65 @@ pub(super) struct PacketState {
 /// window is emptied when its lane's first hit arrives, not for every packet: most lanes of most
 /// packets hit nothing.
 #[cfg(target_arch = "x86_64")]
-#[derive(Default)]
 pub(super) struct LaneWindows {
     windows: [TieWindow; packet::LANES],
-    bounds: [f32; packet::LANES],
+    /// Each lane's window bound, `t_near·(1 + ε)` (the hint's bound before its first hit).
+    bounds: packet::Lanes,
+    /// Each lane's nearest hit (infinity before its first).
+    t_near: packet::Lanes,
     /// The lanes whose windows hold this packet's hits (the others' are stale).
     filled: u32,
 }
 
 #[cfg(target_arch = "x86_64")]
+impl Default for LaneWindows {
+    fn default() -> Self {
+        // SAFETY: a zeroed `__m256` is eight 0.0 (the bounds are set by `reset` before use).
+        let zero = unsafe { std::mem::zeroed() };
+        Self { windows: Default::default(), bounds: zero, t_near: zero, filled: 0 }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
 impl LaneWindows {
-    /// Empties every window, with the bound `bounds[l]` on lane `l`.
-    fn reset(&mut self, bounds: [f32; packet::LANES]) {
+    /// Empties every window, with the bound `bounds` (by lane).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn reset(&mut self, bounds: packet::Lanes) {
         self.bounds = bounds;
+        self.t_near = packet::splat(f32::INFINITY);
         self.filled = 0;
     }
 
-    #[inline(always)]
-    pub(super) fn add(&mut self, lane: usize, hit: Hit) {
-        let window = &mut self.windows[lane];
-        if self.filled & (1 << lane) == 0 {
-            self.filled |= 1 << lane;
-            window.clear();
-            window.bound = self.bounds[lane];
+    /// Adds the hits of one triangle: the lanes `hits` at `t`, each lane's hit by `hit`. Each
+    /// window's bound is `TieWindow::add`'s, `t_near·(1 + ε)` with the same product, worked out in
+    /// registers for all the lanes at once.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn add(&mut self, hits: u32, t: packet::Lanes, hit: impl Fn(usize, f32) -> Hit) {
+        let mask = packet::lane_mask(hits);
+        self.t_near = packet::min_where(self.t_near, t, mask);
+        self.bounds = packet::select(self.bounds, packet::scaled(self.t_near, 1.0 + TIE_EPSILON), mask);
+        let t = packet::store(t);
+        let mut left = hits;
+        while left != 0 {
+            let lane = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let window = &mut self.windows[lane];
+            if self.filled & (1 << lane) == 0 {
+                self.filled |= 1 << lane;
+                window.clear();
+            }
+            window.add(hit(lane, t[lane]));
         }
-        window.add(hit);
-        self.bounds[lane] = window.bound;
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 impl packet::LaneBounds for LaneWindows {
     #[inline(always)]
-    fn tmax(&self) -> &[f32; packet::LANES] {
-        &self.bounds
+    fn tmax(&self) -> packet::Lanes {
+        self.bounds
     }
 }
 
@@ -449,17 +474,14 @@ impl CpuBackend {
             for pr in (0..rows).step_by(PACKET_ROWS) {
                 for pc in (col0..col1).step_by(PACKET_COLS) {
                     let texel = |l: usize| (pr + l / PACKET_COLS, pc + l % PACKET_COLS);
-                    let (mut u, mut v) = ([0f32; LANES], [0f32; LANES]);
                     // Whole blocks (all but the image's edges) row by row, the rest texel by texel.
                     let whole = pr + PACKET_ROWS <= rows && pc + PACKET_COLS <= col1;
-                    let mut lanes = 0u32;
-                    if whole {
-                        for (i, (u, v)) in u.chunks_exact_mut(PACKET_COLS).zip(v.chunks_exact_mut(PACKET_COLS)).enumerate() {
-                            u.copy_from_slice(&self.texel_u[pc..pc + PACKET_COLS]);
-                            v.fill(self.texel_v[row0 + pr + i]);
-                        }
-                        lanes = u32::MAX >> (32 - LANES);
+                    let (lanes, (u, v)) = if whole {
+                        let u = self.texel_u[pc..][..PACKET_COLS].try_into().expect("PACKET_COLS long");
+                        let v = self.texel_v[row0 + pr..][..PACKET_ROWS].try_into().expect("PACKET_ROWS long");
+                        (u32::MAX >> (32 - LANES), packet::Packet::block_uv(u, v))
                     } else {
+                        let (mut u, mut v, mut lanes) = ([0f32; LANES], [0f32; LANES], 0u32);
                         for l in 0..LANES {
                             let (row, col) = texel(l);
                             if row < rows && col < col1 {
@@ -467,8 +489,9 @@ impl CpuBackend {
                                 lanes |= 1 << l;
                             }
                         }
-                    }
-                    let p = packet::Packet::through_face(&basis, &u, &v, o, lanes);
+                        (lanes, (packet::load(&u), packet::load(&v)))
+                    };
+                    let p = packet::Packet::through_face(&basis, u, v, o, lanes);
                     let lane_ids = self.trace_packet(&p, state);
                     if whole {
                         for (i, row_ids) in lane_ids.chunks_exact(PACKET_COLS).enumerate() {
@@ -495,7 +518,7 @@ impl CpuBackend {
     fn trace_packet(&self, p: &packet::Packet, state: &mut TexelState) -> [u32; packet::LANES] {
         use packet::LANES;
         let ps = &mut state.packet;
-        let mut hint_t = [f32::INFINITY; LANES];
+        let mut hint = packet::splat(f32::INFINITY);
         // The lanes some hint triangle bounds.
         let mut hinted = 0u32;
         for &(ii, i) in &ps.last {
@@ -504,18 +527,11 @@ impl CpuBackend {
             let q = moved.as_ref().unwrap_or(p);
             let tri = &self.blases[inst.blas as usize].triangles[i as usize];
             let (hits, t, _) = packet::intersect_triangle(tri, q, self.near, packet::splat(f32::INFINITY), p.lanes);
-            let t = packet::store(t);
             hinted |= hits;
-            for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
-                hint_t[l] = hint_t[l].min(t[l]);
-            }
+            hint = packet::min_where(hint, t, packet::lane_mask(hits));
         }
-        // A loop, not `array::map` (see `Packet::along`).
-        let mut bounds = hint_t;
-        for b in &mut bounds {
-            *b *= 1.0 + TIE_EPSILON;
-        }
-        ps.windows.reset(bounds);
+        ps.windows.reset(packet::scaled(hint, 1.0 + TIE_EPSILON));
+        let hint_t = packet::store(hint);
         let PacketState { windows, last, winners, tlas_stack, blas_stack } = ps;
         match &self.tlas {
             None => {}
@@ -566,19 +582,15 @@ impl CpuBackend {
         stack: &mut Vec<(u32, u32)>,
         windows: &mut LaneWindows,
     ) {
-        use packet::{LANES, LaneBounds};
+        use packet::LaneBounds;
         let inst = &self.instances[ii];
         let blas = &self.blases[inst.blas as usize];
         let moved = self.instance_packet(inst, p);
         let q = moved.as_ref().unwrap_or(p);
         packet::traverse(&blas.bvh, q, lanes, stack, windows, |w, i, m| {
-            let tmax = packet::load(w.tmax());
-            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], q, self.near, tmax, m);
+            let (hits, t, back) = packet::intersect_triangle(&blas.triangles[i], q, self.near, w.tmax(), m);
             if hits != 0 {
-                let t = packet::store(t);
-                for l in (0..LANES).filter(|l| hits & (1 << l) != 0) {
-                    w.add(l, blas.hit(inst, ii, i, t[l], back & (1 << l) != 0));
-                }
+                w.add(hits, t, |l, t| blas.hit(inst, ii, i, t, back & (1 << l) != 0));
             }
         });
     }
@@ -592,5 +604,50 @@ impl CpuBackend {
     #[inline]
     fn instance_packet(&self, inst: &Instance, p: &packet::Packet) -> Option<packet::Packet> {
         Some(p.transformed(inst.to_model.as_ref()?))
+    }
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// After any hits, each lane's bound in registers is its tie window's own bound (the
+        /// hint's bound before its first hit), and its nearest hit the window's.
+        #[test]
+        fn lane_bounds_are_the_tie_windows_bounds(
+            hint in prop::collection::vec(prop_oneof![Just(f32::INFINITY), 0.1f32..10.0], packet::LANES),
+            hits in prop::collection::vec((0u32..1 << packet::LANES, prop::collection::vec(0.1f32..10.0, packet::LANES)), 0..12),
+        ) {
+            if !super::super::wide_instructions() {
+                eprintln!("skipped: no AVX2");
+                return Ok(());
+            }
+            let hint: [f32; packet::LANES] = hint.try_into().expect("LANES long");
+            let mut w = LaneWindows::default();
+            // SAFETY: AVX2 is present (checked above).
+            let (bounds, t_near) = unsafe {
+                w.reset(packet::load(&hint));
+                for (lanes, t) in &hits {
+                    let t: [f32; packet::LANES] = t.clone().try_into().expect("LANES long");
+                    // Only hits inside the bound reach a window (the triangle test's `tmax`).
+                    let inside = (0..packet::LANES)
+                        .filter(|&l| lanes & (1 << l) != 0 && t[l] <= packet::store(w.bounds)[l])
+                        .fold(0, |m, l| m | 1 << l);
+                    let hit = |l: usize, t: f32| Hit { t, obj: l as u32, back: false, instance: 0, tri: 0 };
+                    w.add(inside, packet::load(&t), hit);
+                }
+                (packet::store(w.bounds), packet::store(w.t_near))
+            };
+            for l in 0..packet::LANES {
+                if w.filled & (1 << l) != 0 {
+                    prop_assert_eq!(bounds[l].to_bits(), w.windows[l].bound.to_bits(), "lane {}", l);
+                    prop_assert_eq!(t_near[l].to_bits(), w.windows[l].t_near.to_bits(), "lane {}", l);
+                } else {
+                    prop_assert_eq!(bounds[l].to_bits(), hint[l].to_bits(), "lane {}", l);
+                }
+            }
+        }
     }
 }
