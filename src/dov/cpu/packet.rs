@@ -65,17 +65,21 @@ impl Packet {
     pub fn along(dir: [Lanes; 3], origin: Vec3A, lanes: u32) -> Self {
         // Loops, not `array::map`: the closure `map` calls cannot be inlined into it (it lacks
         // the caller's AVX2), and the call per element cost the packet tracer about a tenth.
-        let (mut inverse, mut negative) = ([splat(0.0); 3], [0u32; 3]);
-        for axis in 0..3 {
-            for h in 0..HALVES {
+        // Each field made whole in registers and written once: a `u32` built up by four-byte
+        // read-modify-writes stalled the copy of the packet that read it back.
+        let mut p = Self { origin, dir, inv: [splat(0.0); 3], lanes, negative: [0; 3] };
+        for (axis, d) in dir.iter().enumerate() {
+            let mut negative = 0;
+            for (h, &d) in d.iter().enumerate() {
                 // obvhs's `Ray::inv_direction`, eight lanes at a time (was a scalar division each).
-                inverse[axis][h] = safe_inverse(dir[axis][h]);
+                p.inv[axis][h] = safe_inverse(d);
                 // `d < 0.0`, ordered: false for −0.0 (and NaN), as obvhs's octant.
-                let below = _mm256_cmp_ps::<_CMP_LT_OQ>(dir[axis][h], _mm256_setzero_ps());
-                negative[axis] |= (_mm256_movemask_ps(below) as u32) << (8 * h);
+                let below = _mm256_cmp_ps::<_CMP_LT_OQ>(d, _mm256_setzero_ps());
+                negative |= (_mm256_movemask_ps(below) as u32) << (8 * h);
             }
+            p.negative[axis] = negative;
         }
-        Self { origin, dir, inv: inverse, lanes, negative }
+        p
     }
 
     /// The packet of the texel rays from `origin` through `(u, v)` of face `b`, lane by lane:
@@ -342,7 +346,8 @@ fn enter_children(
     range: &InverseRange,
     tmax: Lanes,
     lanes: u32,
-) -> ([u32; 8], u32) {
+    entered: &mut [u32; 8],
+) -> u32 {
     let e = node.compute_extent();
     let o = Vec3A::from(node.p) - p.origin;
     // SAFETY: reads the 8 bytes of `b`.
@@ -376,9 +381,9 @@ fn enter_children(
     let meta = unsafe { _mm_loadl_epi64(node.child_meta.as_ptr().cast()) };
     let used = !(_mm_movemask_epi8(_mm_cmpeq_epi8(meta, _mm_setzero_si128())) as u32) & 0xff;
     let maybe = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(group_t0, group_t1)) as u32 & used;
-    let mut entered = [0u32; 8];
+    *entered = [0; 8];
     if maybe == 0 {
-        return (entered, 0);
+        return 0;
     }
     // Eight lanes at a time, over the children the group may enter.
     for (h, tmax) in tmax.iter().enumerate() {
@@ -415,7 +420,7 @@ fn enter_children(
         entered[slot] &= lanes;
         slots |= u32::from(entered[slot] != 0) << slot;
     }
-    (entered, slots)
+    slots
 }
 
 /// The eight bits of `slots` reordered so that bit `k` is bit `k ^ oct`: swapping neighbours,
@@ -459,11 +464,14 @@ pub(super) fn traverse<B: LaneBounds>(
         let (oct, group) = p.octant_group(left);
         left &= !group;
         let range = InverseRange::of(p, group);
+        let mut entered = [0u32; 8];
         stack.clear();
         stack.push((0, group));
         while let Some((index, lanes)) = stack.pop() {
             let node = &bvh.nodes[index as usize];
-            let (entered, slots) = enter_children(node, p, oct, &range, bounds.tmax(), lanes);
+            // The caller's array, not a returned one: returning it copied it out whole, which
+            // stalled on the four-byte writes just made to it.
+            let slots = enter_children(node, p, oct, &range, bounds.tmax(), lanes, &mut entered);
             // obvhs's build puts children in slots so that slot ^ octant runs near to far: bit k
             // of `order` is slot k ^ octant's.
             let order = |slots: u32| xor_permuted(slots, oct);
@@ -570,8 +578,12 @@ mod tests {
                     let (oct, group) = p.octant_group(left);
                     left &= !group;
                     // SAFETY: as above.
-                    let (entered, slots) =
-                        unsafe { enter_children(node, &p, oct, &InverseRange::of(&p, group), load(&tmax), group) };
+                    let mut entered = [0; 8];
+                    // SAFETY: as above.
+                    let slots = unsafe {
+                        let range = InverseRange::of(&p, group);
+                        enter_children(node, &p, oct, &range, load(&tmax), group, &mut entered)
+                    };
                     let nonzero = (0..8).fold(0, |m, slot| m | u32::from(entered[slot] != 0) << slot);
                     prop_assert_eq!(slots, nonzero, "entered slots");
                     for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
