@@ -1,7 +1,7 @@
 /* Casts the rays that tools/src/bin/ray-speed.rs cast, with Intel Embree 3's own C API on one
  * thread, in its two modes: one ray at a time (rtcIntersect1) and coherent packets of 4 x 4 rays
- * (rtcIntersect16, the same 4 x 4 texel tiles hdov's packet tracer uses, with the coherent
- * flag). Checks the hit objects against hdov's id cubes and prints both speeds beside hdov's.
+ * (rtcIntersect16 over 4 x 4 texel tiles, with the coherent flag: 16 rays is the widest packet
+ * Embree's API takes; hdov's packets are its own shape, cpu::PACKET_TEXELS). Checks the hit objects against hdov's id cubes and prints both speeds beside hdov's.
  * Times are the process's CPU time, as hdov's are.
  *
  *   cc -O2 -march=native tools/embree/embree_c_speed.c -lembree3 -o embree_c_speed
@@ -153,7 +153,7 @@ int main(int argc, char **argv) {
   printf("embree C API, rtcIntersect1:              %.2f ms CPU per point, %.2f M rays/s\n", ms1, rays / ms1 / 1e3);
   printf("embree C API, coherent 4 x 4 rtcIntersect16: %.2f ms CPU per point, %.2f M rays/s\n", ms16, rays / ms16 / 1e3);
   printf("hdov render_ids, one ray at a time:       %.2f ms CPU per point\n", ms_ray);
-  printf("hdov render_ids, 4 x 4 ray packets:       %.2f ms CPU per point\n", ms_fast);
+  printf("hdov render_ids, ray packets:             %.2f ms CPU per point\n", ms_fast);
   printf("ratio hdov packets / embree: %.3f against rtcIntersect1, %.3f against coherent packets\n", ms_fast / ms1,
          ms_fast / ms16);
   printf("hit objects differing from hdov: %zu (single), %zu (packets) of %zu texels; hdov hit %zu; packets vs single %zu\n",

@@ -68,7 +68,7 @@ def main():
           f"(wall {1e3 * total_wall / n:.2f} ms)")
     print(f"hdov reference tracer:               {ms_ref:.2f} ms CPU per point, {rays / ms_ref / 1e3:.2f} M rays/s")
     print(f"hdov render_ids, one ray at a time:  {ms_per_ray:.2f} ms CPU per point, {rays / ms_per_ray / 1e3:.2f} M rays/s")
-    print(f"hdov render_ids, 4 × 4 ray packets: {ms_fast:.2f} ms CPU per point, {rays / ms_fast / 1e3:.2f} M rays/s")
+    print(f"hdov render_ids, ray packets:        {ms_fast:.2f} ms CPU per point, {rays / ms_fast / 1e3:.2f} M rays/s")
     print(f"ratio hdov/embree time per ray: reference {ms_ref / ms_embree:.3f}, one ray at a time "
           f"{ms_per_ray / ms_embree:.3f}, packets {ms_fast / ms_embree:.3f}")
     print(f"hit objects differing: {differ} of {n * rays} texels ({100 * differ / (n * rays):.4f} %), "

@@ -1,8 +1,8 @@
-//! Packet tracing for the AVX2 build of `render_ids`: the sixteen rays of one 4 × 4 block of
-//! texels, which share their origin, go through each BVH together, one AVX2 lane per ray (two
-//! registers of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63).
+//! Packet tracing for the AVX2 build of `render_ids`: the 32 rays of one block of 4 × 8 texels,
+//! which share their origin, go through each BVH together, one AVX2 lane per ray (four registers
+//! of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63, 100).
 //!
-//! A node is fetched and its children's quantised bounds converted once for the sixteen rays, and
+//! A node is fetched and its children's quantised bounds converted once for all the rays, and
 //! the stack holds one entry per node for all of them. One test of the eight children for the
 //! whole packet first rules out those no lane can enter (exactly: see [`enter_children`]); on
 //! the others each lane does obvhs's own box test, and on each triangle
@@ -20,15 +20,17 @@ use super::bvh::RayTriangle;
 use crate::dov::cubemap::FaceBasis;
 use super::trace::NODE_TMIN;
 
-/// AVX2 registers of `f32` per lane vector.
-const HALVES: usize = 2;
-/// Rays per packet.
-pub(super) const LANES: usize = 8 * HALVES;
+/// A packet's texels: `PACKET_COLS` columns of `PACKET_ROWS` rows, lane `row · COLS + col`
+/// ([`super::PACKET_TEXELS`]).
+pub(super) const PACKET_COLS: usize = super::PACKET_TEXELS.0;
+pub(super) const PACKET_ROWS: usize = super::PACKET_TEXELS.1;
+/// Rays per packet (at most 32: lane sets are `u32` masks).
+pub(super) const LANES: usize = PACKET_COLS * PACKET_ROWS;
+/// AVX2 registers of `f32` per lane vector (called halves from when there were two).
+const HALVES: usize = LANES / 8;
 /// One `f32` per lane.
 pub(super) type Lanes = [__m256; HALVES];
-/// A packet's texels: `PACKET_COLS` columns of `LANES / PACKET_COLS` rows, lane `row · COLS + col`.
-pub(super) const PACKET_COLS: usize = 4;
-pub(super) const PACKET_ROWS: usize = LANES / PACKET_COLS;
+const _: () = assert!(LANES.is_multiple_of(8) && LANES <= 32 && (PACKET_COLS == 4 || PACKET_COLS == 8));
 
 /// [`LANES`] rays from one origin in one BVH's space, lane by lane.
 #[derive(Clone, Copy)]
@@ -105,11 +107,21 @@ impl Packet {
     #[target_feature(enable = "avx2")]
     #[inline]
     pub fn block_uv(u: &[f32; PACKET_COLS], v: &[f32; PACKET_ROWS]) -> (Lanes, Lanes) {
-        // SAFETY: reads the four f32 of `u`.
-        let u4 = unsafe { _mm_loadu_ps(u.as_ptr()) };
-        let u8 = _mm256_set_m128(u4, u4);
-        let rows = |a: f32, b: f32| _mm256_set_m128(_mm_set1_ps(b), _mm_set1_ps(a));
-        ([u8; HALVES], [rows(v[0], v[1]), rows(v[2], v[3])])
+        let mut lanes_u = [_mm256_setzero_ps(); HALVES];
+        let mut lanes_v = [_mm256_setzero_ps(); HALVES];
+        for h in 0..HALVES {
+            if PACKET_COLS == 8 {
+                // SAFETY: reads the eight f32 of `u`.
+                lanes_u[h] = unsafe { _mm256_loadu_ps(u.as_ptr()) };
+                lanes_v[h] = _mm256_set1_ps(v[h]);
+            } else {
+                // SAFETY: reads the first four f32 of `u`.
+                let u4 = unsafe { _mm_loadu_ps(u.as_ptr()) };
+                lanes_u[h] = _mm256_set_m128(u4, u4);
+                lanes_v[h] = _mm256_set_m128(_mm_set1_ps(v[2 * h + 1]), _mm_set1_ps(v[2 * h]));
+            }
+        }
+        (lanes_u, lanes_v)
     }
 
     /// This packet carried by `m` (world → model space), lane by lane as glam's
@@ -359,7 +371,8 @@ fn enter_children(
         (&node.child_min_y, &node.child_max_y),
         (&node.child_min_z, &node.child_max_z),
     ];
-    let widest = -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), _mm256_max_ps(tmax[0], tmax[1])));
+    let widest_lanes = tmax.iter().fold(_mm256_set1_ps(f32::NEG_INFINITY), |m, t| _mm256_max_ps(m, *t));
+    let widest = -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), widest_lanes));
     let (mut group_t0, mut group_t1) = (_mm256_set1_ps(NODE_TMIN), _mm256_set1_ps(widest));
     for axis in 0..3 {
         let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
@@ -521,7 +534,7 @@ mod tests {
     /// A direction and a `tmax` (some infinite) per lane, and the lanes in use.
     fn lanes() -> impl Strategy<Value = ([Vec3A; LANES], [f32; LANES], u32)> {
         let tmax = || prop_oneof![Just(f32::INFINITY), 0.0f32..20.0];
-        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..1 << LANES)
+        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..=(u64::MAX >> (64 - LANES)) as u32)
     }
 
     /// Bit `k` of the reordered slots is bit `k ^ oct` of the slots, for every octant and set.
@@ -543,7 +556,8 @@ mod tests {
             eprintln!("skipped: no AVX2");
             return;
         }
-        let (u, v) = ([0.5, -0.25, 1.0, 3.0], [7.0, -8.0, 9.5, 0.125]);
+        let u: [f32; PACKET_COLS] = std::array::from_fn(|c| c as f32 * 0.75 - 1.0);
+        let v: [f32; PACKET_ROWS] = std::array::from_fn(|r| 2.0 - r as f32 * 0.375);
         // SAFETY: AVX2 is present (checked above).
         let (lu, lv) = unsafe {
             let (lu, lv) = Packet::block_uv(&u, &v);
@@ -607,7 +621,7 @@ mod tests {
             uv in prop::collection::vec((-1.0f32..1.0, -1.0f32..1.0), LANES),
             cols in [vec3a(), vec3a(), vec3a(), vec3a()],
             origin in vec3a(),
-            lanes in 1u32..1 << LANES,
+            lanes in 1u32..=(u64::MAX >> (64 - LANES)) as u32,
         ) {
             if !super::super::wide_instructions() {
                 eprintln!("skipped: no AVX2");

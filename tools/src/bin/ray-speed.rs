@@ -5,7 +5,7 @@
 //! (`ViewGrid::resolve`, default 8 × 1 × 8 = 162 corners). At each point, on this one thread:
 //! `render_ids_reference` (one `trace` per texel: the straightforward tracer), and `render_ids` (the
 //! fast path, in a 1-thread rayon pool) twice: one ray at a time (`set_packets(false)`, the
-//! previous fast path) and by packets of 4 × 4 rays (the default); each id cube must equal the
+//! previous fast path) and by packets of rays (the default, `cpu::PACKET_TEXELS`); each id cube must equal the
 //! reference's. Each tracer is timed in its own pass over all the points (packets first), as
 //! Embree's harness times its modes. Times are the process's CPU time (one thread busy at a
 //! time), steadier than the wall clock on a shared machine.
@@ -83,9 +83,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (t_fast, wall_fast) = timed(true, &mut fast)?;
     if std::env::var_os("RAY_SPEED_PACKETS_ONLY").is_some() {
         let ms = t_fast.as_secs_f64() * 1e3 / points.len() as f64;
-        println!(
-            "render_ids, packets of 4 × 4 rays: {ms:.2} ms CPU per point (RAY_SPEED_PACKETS_ONLY: nothing else run)"
-        );
+        println!("{}: {ms:.2} ms CPU per point (RAY_SPEED_PACKETS_ONLY: nothing else run)", packets_label());
         return Ok(());
     }
     let (t_per_ray, wall_per_ray) = timed(false, &mut per_ray)?;
@@ -129,7 +127,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     speed("reference tracer", ms_reference, wall_reference);
     speed("render_ids, one ray at a time", ms_per_ray, wall_per_ray);
-    speed("render_ids, packets of 4 × 4 rays", ms_fast, wall_fast);
+    speed(&packets_label(), ms_fast, wall_fast);
     println!(
         "texels differing from the reference, both fast routes: {differing} of 2 × {} (and {ties} ties up to rounding, answered by another of the tied surfaces)",
         rays as usize * points.len()
@@ -146,6 +144,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err(format!("the fast path differs from the reference tracer in {differing} texels").into());
     }
     Ok(())
+}
+
+/// `render_ids, packets of C × R rays`, the packet tracer's shape.
+fn packets_label() -> String {
+    let (cols, rows) = hdov::dov::cpu::PACKET_TEXELS;
+    format!("render_ids, packets of {cols} × {rows} rays")
 }
 
 fn write_f32(path: &std::path::Path, values: impl Iterator<Item = f32>) -> std::io::Result<()> {
