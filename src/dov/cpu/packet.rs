@@ -26,6 +26,8 @@ pub(super) const PACKET_COLS: usize = super::PACKET_TEXELS.0;
 pub(super) const PACKET_ROWS: usize = super::PACKET_TEXELS.1;
 /// Rays per packet (at most 32: lane sets are `u32` masks).
 pub(super) const LANES: usize = PACKET_COLS * PACKET_ROWS;
+/// Every lane of a packet.
+pub(super) const ALL_LANES: u32 = (u64::MAX >> (64 - LANES)) as u32;
 /// AVX2 registers of `f32` per lane vector (called halves from when there were two).
 const HALVES: usize = LANES / 8;
 /// One `f32` per lane.
@@ -534,7 +536,7 @@ mod tests {
     /// A direction and a `tmax` (some infinite) per lane, and the lanes in use.
     fn lanes() -> impl Strategy<Value = ([Vec3A; LANES], [f32; LANES], u32)> {
         let tmax = || prop_oneof![Just(f32::INFINITY), 0.0f32..20.0];
-        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..=(u64::MAX >> (64 - LANES)) as u32)
+        (std::array::from_fn(|_| vec3a()), std::array::from_fn(|_| tmax()), 1u32..=ALL_LANES)
     }
 
     /// Bit `k` of the reordered slots is bit `k ^ oct` of the slots, for every octant and set.
@@ -621,7 +623,7 @@ mod tests {
             uv in prop::collection::vec((-1.0f32..1.0, -1.0f32..1.0), LANES),
             cols in [vec3a(), vec3a(), vec3a(), vec3a()],
             origin in vec3a(),
-            lanes in 1u32..=(u64::MAX >> (64 - LANES)) as u32,
+            lanes in 1u32..=ALL_LANES,
         ) {
             if !super::super::wide_instructions() {
                 eprintln!("skipped: no AVX2");

@@ -479,7 +479,7 @@ impl CpuBackend {
                     let (lanes, (u, v)) = if whole {
                         let u = self.texel_u[pc..][..PACKET_COLS].try_into().expect("PACKET_COLS long");
                         let v = self.texel_v[row0 + pr..][..PACKET_ROWS].try_into().expect("PACKET_ROWS long");
-                        ((u64::MAX >> (64 - LANES)) as u32, packet::Packet::block_uv(u, v))
+                        (packet::ALL_LANES, packet::Packet::block_uv(u, v))
                     } else {
                         let (mut u, mut v, mut lanes) = ([0f32; LANES], [0f32; LANES], 0u32);
                         for l in 0..LANES {
@@ -618,7 +618,7 @@ mod tests {
         #[test]
         fn lane_bounds_are_the_tie_windows_bounds(
             hint in prop::collection::vec(prop_oneof![Just(f32::INFINITY), 0.1f32..10.0], packet::LANES),
-            hits in prop::collection::vec((0u32..=(u64::MAX >> (64 - packet::LANES)) as u32, prop::collection::vec(0.1f32..10.0, packet::LANES)), 0..12),
+            hits in prop::collection::vec((0u32..=packet::ALL_LANES, prop::collection::vec(0.1f32..10.0, packet::LANES)), 0..12),
         ) {
             if !super::super::wide_instructions() {
                 eprintln!("skipped: no AVX2");
