@@ -12,8 +12,9 @@
 //!
 //! `render_ids` traces 8 × 8 tiles, each ray first bounded by the previous texel's winning
 //! triangle, with an AVX2 copy of the tracer chosen at run time that takes each tile in packets of
-//! 4 × 8 rays (`packet`: one AVX2 lane per ray, [`PACKET_TEXELS`]); [`CpuBackend::render_ids_reference`]
-//! is the plain per-ray tracer it must equal (docs/dov.md, "Per-ray speed against Embree").
+//! 4 × 8 rays (`packet`: one AVX2 lane per ray, [`PACKET_TEXELS`]);
+//! [`CpuBackend::render_ids_reference`] is the plain per-ray tracer it must equal (docs/dov.md,
+//! "Per-ray speed against Embree").
 //!
 //! A ray entering an instance's box (nearer than the best hit so far) is carried into model space
 //! by the inverse transform, direction not normalised, so the ray parameter `t` is the same in
@@ -188,8 +189,9 @@ impl CpuBackend {
         self.wide = on && wide_instructions();
     }
 
-    /// Lets the AVX2 build trace packets of [`PACKET_TEXELS`] rays (the default), or one ray at a time (the
-    /// previous fast path, kept for comparison: tests and `ray-speed`; the ids are the same).
+    /// Lets the AVX2 build trace packets of [`PACKET_TEXELS`] rays (the default), or one ray at a
+    /// time (the previous fast path, kept for comparison: tests and `ray-speed`; the ids are the
+    /// same).
     pub fn set_packets(&mut self, on: bool) {
         self.packets = on;
     }

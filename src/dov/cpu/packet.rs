@@ -324,7 +324,7 @@ impl InverseRange {
                 min = _mm256_min_ps(min, _mm256_blendv_ps(inf, *inv, *used));
                 max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, *inv, *used));
             }
-            (lo[axis], hi[axis]) = (horizontal_min(min), -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), max)));
+            (lo[axis], hi[axis]) = (horizontal_min(min), horizontal_max(max));
         }
         Self { lo, hi }
     }
@@ -338,6 +338,13 @@ fn horizontal_min(v: __m256) -> f32 {
     let m = _mm256_min_ps(m, _mm256_shuffle_ps::<0b01_00_11_10>(m, m));
     let m = _mm256_min_ps(m, _mm256_shuffle_ps::<0b10_11_00_01>(m, m));
     _mm256_cvtss_f32(m)
+}
+
+/// The greatest of the eight lanes of `v` (negation is exact).
+#[target_feature(enable = "avx2")]
+#[inline]
+fn horizontal_max(v: __m256) -> f32 {
+    -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), v))
 }
 
 /// For each child slot of `node`, the lanes of `lanes` (all of octant `oct`, their inverse
@@ -374,7 +381,7 @@ fn enter_children(
         (&node.child_min_z, &node.child_max_z),
     ];
     let widest_lanes = tmax.iter().fold(_mm256_set1_ps(f32::NEG_INFINITY), |m, t| _mm256_max_ps(m, *t));
-    let widest = -horizontal_min(_mm256_sub_ps(_mm256_setzero_ps(), widest_lanes));
+    let widest = horizontal_max(widest_lanes);
     let (mut group_t0, mut group_t1) = (_mm256_set1_ps(NODE_TMIN), _mm256_set1_ps(widest));
     for axis in 0..3 {
         let (lo, hi) = (q(bounds[axis].0), q(bounds[axis].1));
@@ -593,7 +600,6 @@ mod tests {
                 while left != 0 {
                     let (oct, group) = p.octant_group(left);
                     left &= !group;
-                    // SAFETY: as above.
                     let mut entered = [0; 8];
                     // SAFETY: as above.
                     let slots = unsafe {

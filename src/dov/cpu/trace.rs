@@ -548,10 +548,8 @@ impl CpuBackend {
             let l = left.trailing_zeros() as usize;
             left &= left - 1;
             let window = &mut windows.windows[l];
-            if windows.filled & (1 << l) == 0 {
-                window.clear();
-            }
-            if window.t_near > hint_t[l] {
+            // A hinted lane without a hit of its own (its window is stale) is traced again too.
+            if windows.filled & (1 << l) == 0 || window.t_near > hint_t[l] {
                 window.clear();
                 // SAFETY: AVX2 and the rest of `wide_instructions` are present (the only caller
                 // is `trace_band_wide`).

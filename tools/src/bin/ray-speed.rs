@@ -5,8 +5,8 @@
 //! (`ViewGrid::resolve`, default 8 × 1 × 8 = 162 corners). At each point, on this one thread:
 //! `render_ids_reference` (one `trace` per texel: the straightforward tracer), and `render_ids` (the
 //! fast path, in a 1-thread rayon pool) twice: one ray at a time (`set_packets(false)`, the
-//! previous fast path) and by packets of rays (the default, `cpu::PACKET_TEXELS`); each id cube must equal the
-//! reference's. Each tracer is timed in its own pass over all the points (packets first), as
+//! previous fast path) and by packets of rays (the default, `cpu::PACKET_TEXELS`); each id cube
+//! must equal the reference's. Each tracer is timed in its own pass over all the points (packets first), as
 //! Embree's harness times its modes. Times are the process's CPU time (one thread busy at a
 //! time), steadier than the wall clock on a shared machine.
 //!
@@ -82,6 +82,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (t_fast, wall_fast) = timed(true, &mut fast)?;
     if std::env::var_os("RAY_SPEED_PACKETS_ONLY").is_some() {
+        ids_file.flush()?;
         let ms = t_fast.as_secs_f64() * 1e3 / points.len() as f64;
         println!("{}: {ms:.2} ms CPU per point (RAY_SPEED_PACKETS_ONLY: nothing else run)", packets_label());
         return Ok(());
