@@ -17,6 +17,20 @@ pub struct ViewGrid {
     pub dims: [u32; 3],
 }
 
+/// The ids `id` gives the lattice points of the box whose range along each axis is
+/// `range(axis)`, x fastest, then z, then y.
+fn lattice_block(range: impl Fn(usize) -> std::ops::RangeInclusive<u32>, id: impl Fn([u32; 3]) -> usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    for y in range(1) {
+        for z in range(2) {
+            for x in range(0) {
+                out.push(id([x, y, z]));
+            }
+        }
+    }
+    out
+}
+
 impl ViewGrid {
     /// Most cells a grid may have (the thesis's city had about 4,000): every cell id fits a
     /// u32 with room to spare, and a mistyped grid is refused instead of allocated.
@@ -159,6 +173,19 @@ impl ViewGrid {
         std::array::from_fn(|i| {
             self.corner_id([c[0] + (i as u32 & 1), c[1] + ((i as u32 >> 1) & 1), c[2] + ((i as u32 >> 2) & 1)])
         })
+    }
+
+    /// The corner ids of the cells within `ring` cells of cell `c` (ring 1: the 4 × 4 × 4 block
+    /// of its own 8 corners and those of its 26 neighbours; ring 0: its own 8), clipped to the
+    /// grid; x fastest, then z, then y.
+    pub fn neighbourhood_corners(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
+        lattice_block(|a| c[a].saturating_sub(ring)..=(c[a] + 1 + ring).min(self.dims[a]), |p| self.corner_id(p))
+    }
+
+    /// The ids of the cells within `ring` cells of cell `c` (itself included), clipped to the
+    /// grid; x fastest, then z, then y.
+    pub fn neighbourhood_cells(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
+        lattice_block(|a| c[a].saturating_sub(ring)..=(c[a] + ring).min(self.dims[a] - 1), |p| self.cell_id(p))
     }
 }
 

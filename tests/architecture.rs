@@ -210,3 +210,172 @@ fn the_import_reader_reads_grouped_paths() {
     let found: Vec<String> = crate_paths(&code).into_iter().collect();
     assert_eq!(found, ["db", "error", "geom"]);
 }
+
+/// The module path of a file under a crate's `src/` (`dov/cpu/trace.rs` → `dov::cpu::trace`,
+/// `dov/cpu/mod.rs` → `dov::cpu`, `lib.rs` and `main.rs` → the crate root).
+fn module_path(src: &Path, file: &Path) -> Vec<String> {
+    let rel = file.strip_prefix(src).unwrap().with_extension("");
+    let mut parts: Vec<String> = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+    if matches!(parts.last().map(String::as_str), Some("mod" | "lib" | "main")) {
+        parts.pop();
+    }
+    parts
+}
+
+/// The paths that `code` (of module `module`) names, absolute from the crate root, as far as
+/// their segments go: `crate::a::b`, `super::x` (the parent's child `x`), `self::y`, grouped
+/// imports included (`super::{bvh::Hit, trace}` names `..::bvh::Hit` and `..::trace`).
+fn absolute_paths(code: &str, module: &[String]) -> Vec<Vec<String>> {
+    let ident = |s: &str| -> String { s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect() };
+    // The segments of `rest`, a path after its base: `a::b::{c, d::e}` → [a, b, c], [a, b, d, e].
+    fn segments(rest: &str, ident: &dyn Fn(&str) -> String) -> Vec<Vec<String>> {
+        let mut head = Vec::new();
+        let mut s = rest.trim_start();
+        loop {
+            if let Some(group) = s.strip_prefix('{') {
+                let mut out = Vec::new();
+                let (mut depth, mut start) = (0, 0);
+                for (i, c) in group.char_indices() {
+                    match c {
+                        '{' => depth += 1,
+                        '}' if depth == 0 => {
+                            out.push(&group[start..i]);
+                            break;
+                        }
+                        '}' => depth -= 1,
+                        ',' if depth == 0 => {
+                            out.push(&group[start..i]);
+                            start = i + 1;
+                        }
+                        _ => {}
+                    }
+                }
+                return out
+                    .into_iter()
+                    .flat_map(|part| segments(part, ident))
+                    .map(|tail| head.iter().cloned().chain(tail).collect())
+                    .collect();
+            }
+            let name = ident(s);
+            if name.is_empty() {
+                return vec![head];
+            }
+            s = &s[name.len()..];
+            head.push(name);
+            match s.strip_prefix("::") {
+                Some(next) => s = next,
+                None => return vec![head],
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for base in ["crate::", "super::", "self::"] {
+        for (at, _) in code.match_indices(base) {
+            if code[..at].chars().last().is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':') {
+                continue; // `hdov_crate::`, or the second `super::` of `super::super::`
+            }
+            let mut root: Vec<String> = match base {
+                "crate::" => Vec::new(),
+                "self::" => module.to_vec(),
+                _ => module[..module.len().saturating_sub(1)].to_vec(),
+            };
+            let mut rest = &code[at + base.len()..];
+            while let Some(r) = rest.strip_prefix("super::") {
+                root.pop();
+                rest = r;
+            }
+            for tail in segments(rest, &ident) {
+                found.push(root.iter().cloned().chain(tail).collect());
+            }
+        }
+    }
+    found
+}
+
+/// Circles between the files of one folder (a *room*): for each module with children, its
+/// children (files and subfolders) as nodes, and an edge where a file under one child names
+/// another child by path. Names reached through a parent's re-export are not seen.
+fn file_circles(src: &Path) -> Vec<String> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    let modules: Vec<(Vec<String>, String)> = files
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            // A file's own test module names the file as `super`: leave it out.
+            let text = text.split("#[cfg(test)]").next().unwrap_or_default().to_string();
+            (module_path(src, f), code_of(&text))
+        })
+        .collect();
+    let all: BTreeSet<Vec<String>> = modules.iter().map(|m| m.0.clone()).collect();
+    let mut circles = Vec::new();
+    for room in all.iter().filter(|r| all.iter().any(|m| m.len() == r.len() + 1 && m.starts_with(r))) {
+        let children: BTreeSet<&String> =
+            all.iter().filter(|m| m.len() == room.len() + 1 && m.starts_with(room)).map(|m| &m[room.len()]).collect();
+        let mut edges: BTreeSet<(String, String)> = BTreeSet::new();
+        for (module, code) in modules.iter().filter(|(m, _)| m.len() > room.len() && m.starts_with(room)) {
+            let from = &module[room.len()];
+            for path in absolute_paths(code, module) {
+                if path.len() > room.len() && path.starts_with(room) {
+                    let to = &path[room.len()];
+                    if to != from && children.contains(to) {
+                        edges.insert((from.clone(), to.clone()));
+                    }
+                }
+            }
+        }
+        // A circle is an edge whose target reaches its source.
+        let reaches = |a: &String, b: &String| {
+            let mut seen = BTreeSet::from([a.clone()]);
+            let mut stack = vec![a.clone()];
+            while let Some(n) = stack.pop() {
+                if &n == b {
+                    return true;
+                }
+                for (_, to) in edges.iter().filter(|(f, _)| *f == n) {
+                    if seen.insert(to.clone()) {
+                        stack.push(to.clone());
+                    }
+                }
+            }
+            false
+        };
+        for (from, to) in &edges {
+            if reaches(to, from) {
+                circles.push(format!(
+                    "{}: {from} → {to} → … → {from}",
+                    if room.is_empty() { "crate root".into() } else { room.join("::") }
+                ));
+            }
+        }
+    }
+    circles
+}
+
+#[test]
+fn no_circles_between_the_files_of_a_folder() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for src in ["src", "storage/src", "tools/src"] {
+        let circles = file_circles(&root.join(src));
+        assert!(circles.is_empty(), "{src}: files that import each other:\n{}", circles.join("\n"));
+    }
+}
+
+#[test]
+fn the_circle_finder_finds_circles() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, text).unwrap();
+    };
+    write("lib.rs", "mod room;");
+    write("room/mod.rs", "mod a; mod b; mod c; pub use a::A;");
+    write("room/a.rs", "use super::{b::B, c};");
+    write("room/b.rs", "use crate::room::c::C;\n#[cfg(test)]\nmod tests { use super::super::a::A; }");
+    write("room/c.rs", "fn f() { super::super::room::a::g() }");
+    let circles = file_circles(dir.path());
+    assert_eq!(circles, ["room: a → b → … → a", "room: a → c → … → a", "room: b → c → … → b", "room: c → a → … → c"]);
+    write("room/c.rs", "use super::A; // through the re-export: not seen");
+    assert!(file_circles(dir.path()).is_empty());
+}

@@ -63,15 +63,15 @@ fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
         serde_json::from_slice(&std::fs::read(tmp.path().join(name).join("manifest.json")).unwrap()).unwrap()
     };
     let probed = build("probed", &["--backend", "cpu", "--samples", "probe:8:2"]);
-    assert_eq!(probed["build"]["visibility"]["probe"], "probe:8:2");
+    assert_eq!(probed["build"]["visibility"]["sampling"], "probe:8:2");
     assert_eq!(probed["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box"]));
     // The default is region rays (decision 98), with both floors.
     let default = build("default", &["--backend", "cpu"]);
-    assert_eq!(default["build"]["visibility"]["probe"], "probe:32:4:24576");
+    assert_eq!(default["build"]["visibility"]["sampling"], "probe:32:4:24576");
     assert_eq!(default["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box", "neighbours"]));
     let bare = ["--backend", "cpu", "--zero-dov-floor", "none"];
     let corners = build("corners", &[&bare[..], &["--samples", "corners"]].concat());
-    assert!(corners["build"]["visibility"].get("probe").is_none());
+    assert_eq!(corners["build"]["visibility"]["sampling"], "corners");
     build("probed-bare", &[&bare[..], &["--samples", "probe:8:2"]].concat());
     let objects = |name: &str, at: &str| -> std::collections::BTreeSet<u64> {
         let o = hdov(&["query", &db(name), "--at", at, "--eta", "0", "--mode", "naive", "--json"]);
@@ -101,7 +101,7 @@ fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
     eprintln!("probing added {more} objects over 6 cells");
     if hdov_testkit::gpu::adapter_or_skip() {
         let gpu = build("gpu", &["--backend", "gpu", "--samples", "probe:8:2"]);
-        assert_eq!(gpu["build"]["visibility"]["probe"], "probe:8:2");
+        assert_eq!(gpu["build"]["visibility"]["sampling"], "probe:8:2");
     }
 }
 

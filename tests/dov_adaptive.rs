@@ -3,12 +3,12 @@
 //! walls, and inside a build.
 
 use glam::Vec3;
-use hdov::dov::adaptive::AdaptiveSampling;
+use hdov::AdaptiveSampling;
 use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, DovBackend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
+use hdov::{RayProbing, Sampling};
 use hdov_testkit::audit::dense_cells;
 use hdov_testkit::scenes::*;
 use proptest::prelude::*;
@@ -105,7 +105,7 @@ proptest! {
     #[test]
     fn adaptive_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
         let options = PrecomputeOptions {
-            adaptive: Some(AdaptiveSampling::new(2, 32).unwrap()),
+            samplers: vec![Sampling::Adaptive(AdaptiveSampling::new(2, 32).unwrap())],
             zero_dov_tests: vec![],
             ..Default::default()
         };
@@ -130,7 +130,8 @@ proptest! {
     /// fails if the sampler loses what it finds today.
     #[test]
     fn probing_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
-        let options = PrecomputeOptions { probe: Some(RayProbing::DEFAULT), zero_dov_tests: vec![], ..Default::default() };
+        let options =
+            PrecomputeOptions { samplers: vec![Sampling::Probe(RayProbing::DEFAULT)], zero_dov_tests: vec![], ..Default::default() };
         finds_what_dense_sampling_finds(seed, walls, boxes, &options, PROBE_TOLERANCE_TEXELS, &wide_grid())?;
     }
 }
@@ -147,7 +148,7 @@ fn adaptive_build_counts_and_keeps_the_corner_dov() {
     let mut backend = CpuBackend::new(&scene, R).unwrap();
     let corners_only = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
     let sampling = AdaptiveSampling::new(2, 6).unwrap();
-    let adaptive = PrecomputeOptions { adaptive: Some(sampling), ..corners_only.clone() };
+    let adaptive = PrecomputeOptions { samplers: vec![Sampling::Adaptive(sampling)], ..corners_only.clone() };
     let run = |b: &mut dyn DovBackend, o: &PrecomputeOptions| {
         precompute_shard(b, &grid, &bounds, &shape, o, Shard::ALL, &hdov::progress::Quiet).unwrap()
     };

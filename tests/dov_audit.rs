@@ -1,6 +1,6 @@
 //! The rate of visible zero-DoV objects (seen from inside a cell, by no corner) on a street scene,
 //! and how many the floor test catches at several margins. Slow (thousands of point
-//! measurements), so ignored by default; its numbers are in docs/dov.md:
+//! measurements), so ignored by default; its numbers are in docs/journal/dov-sampling.md, §0 (summary: docs/dov.md, "What the floors catch"):
 //!
 //! `cargo test --release --test dov_audit -- --ignored --nocapture`
 

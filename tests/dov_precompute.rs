@@ -73,7 +73,7 @@ fn shared_corners_are_measured_once() {
 
     // With K interior points: K more per cell, corners still once.
     backend.points.clear();
-    let options = PrecomputeOptions { interior_samples: 3, ..Default::default() };
+    let options = PrecomputeOptions::sampled(hdov::Sampling::Interior(3));
     let out =
         precompute_shard(&mut backend, &grid, &bounds, &shape, &options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     assert_eq!(backend.points.len(), 30 + 3 * 8);

@@ -344,7 +344,7 @@ fn build_visibility(
     let t = Instant::now();
     let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, ..Default::default() };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
-    if v.sampling.probe().is_some() {
+    if v.sampling.sampler().casts_rays() {
         backend = WithRays::wrap(backend, scene)?;
     }
     let shape =

@@ -120,19 +120,20 @@ impl CityScale {
     }
 }
 
+hdov_storage::named!(CityScale, "scale");
+
 impl fmt::Display for CityScale {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        hdov_storage::names::write_name(*self, f)
     }
 }
 
+/// Any case (`Large`, `large`).
 impl FromStr for CityScale {
     type Err = Error;
 
     fn from_str(s: &str) -> Result<Self, Error> {
-        CityScale::ALL.into_iter().find(|scale| scale.name().eq_ignore_ascii_case(s)).ok_or_else(|| {
-            Error::bad_param(Param::Scale, format!("unknown scale '{s}': expected tiny, small, default, large or huge"))
-        })
+        hdov_storage::names::parse_name(&s.to_ascii_lowercase()).map_err(|r| Error::bad_param(Param::Scale, r))
     }
 }
 
@@ -256,15 +257,8 @@ impl WalkKind {
     }
 }
 
-impl std::str::FromStr for WalkKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        WalkKind::ALL
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown walk '{s}' (straight, turning, back-and-forth)"))
-    }
-}
+hdov_storage::named!(WalkKind, "walk");
+hdov_storage::by_names!(WalkKind);
 
 /// `steps` (position, look direction) pairs of walk `kind` in `grid`'s region.
 pub fn walk(grid: &ViewGrid, kind: WalkKind, steps: usize) -> Vec<(Vec3, Vec3)> {

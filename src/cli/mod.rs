@@ -11,7 +11,8 @@ mod serve;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use hdov::{Error, Param};
+use hdov::render::Renderer;
+use hdov::{Error, Param, Result};
 
 #[derive(Parser)]
 #[command(name = "hdov", version, about = "A disk-resident visibility database for large 3D scenes (HDoV-tree)")]
@@ -154,4 +155,14 @@ fn flag_of(param: Param) -> &'static str {
         | Param::Samples
         | Param::TreeShape => param.name(),
     }
+}
+
+/// The renderer, or a one-line error without a graphics adapter.
+fn open_renderer() -> Result<Renderer> {
+    Renderer::new().map_err(|e| match e {
+        Error::Gpu(reason) if reason.starts_with("no adapter") => {
+            Error::bad_param(Param::Render, "no graphics adapter (install mesa-vulkan-drivers)")
+        }
+        e => e,
+    })
 }

@@ -175,7 +175,7 @@ pub struct WalkCmd {
     #[command(flatten)]
     query: QueryArgs,
     /// visual (the HDoV-tree) or review (the spatial baseline: disk cells and CSearch).
-    #[arg(long, default_value = "visual")]
+    #[arg(long, value_enum, default_value_t = WalkMethod::Visual)]
     method: WalkMethod,
     /// Review: the disk cell over the frustum cell, per axis (SF).
     #[arg(long, default_value_t = review::DEFAULT_REVIEW_BOX)]
@@ -210,21 +210,10 @@ pub struct WalkCmd {
 }
 
 /// `hdov walk --method`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum WalkMethod {
     Visual,
     Review,
-}
-
-impl std::str::FromStr for WalkMethod {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "visual" => Ok(WalkMethod::Visual),
-            "review" => Ok(WalkMethod::Review),
-            _ => Err(format!("unknown method '{s}' (visual, review)")),
-        }
-    }
 }
 
 /// A walk's totals.
@@ -277,7 +266,7 @@ pub fn walk(a: WalkCmd) -> Result<()> {
         None => db.session(&params)?,
         Some(r) => db.review_session(&params, r)?,
     };
-    let renderer = if a.fidelity { Some(super::render::open_renderer()?) } else { None };
+    let renderer = if a.fidelity { Some(super::open_renderer()?) } else { None };
     let mut steps: Vec<Step> = Vec::with_capacity(path.len());
     for (line, at, look) in path {
         let mut step = session.step(at, look).map_err(|e| match e {

@@ -9,9 +9,9 @@ use serde::Serialize;
 
 use super::args::{parse_dims, parse_vec3};
 use hdov::Database;
+use hdov::Result;
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
-use hdov::{Error, Param, Result};
 
 #[derive(Args)]
 pub struct RenderCmd {
@@ -60,21 +60,11 @@ struct Report {
     fidelity: Option<Fidelity>,
 }
 
-/// The renderer, or a one-line error without a graphics adapter.
-pub(super) fn open_renderer() -> Result<Renderer> {
-    Renderer::new().map_err(|e| match e {
-        Error::Gpu(reason) if reason.starts_with("no adapter") => {
-            Error::bad_param(Param::Render, "no graphics adapter (install mesa-vulkan-drivers)")
-        }
-        e => e,
-    })
-}
-
 pub fn render(a: RenderCmd) -> Result<()> {
     let db = Database::open(&a.db)?;
     let view = View::new(a.at, a.look, a.fov, a.size[0], a.size[1]);
     view.check()?;
-    let renderer = open_renderer()?;
+    let renderer = super::open_renderer()?;
     let full = renderer.render_full(&db, &view, a.color)?;
     let (image, items, faces, fid) = if a.full {
         let catalog = db.catalog();

@@ -5,16 +5,17 @@
 //! - [`DovBackend`]: renders an *id cube* (one object id per texel) around a point; two
 //!   independent implementations, [`cpu::CpuBackend`] (ray casting over a BVH) and
 //!   [`gpu::GpuBackend`] (wgpu rasterisation), which must agree;
-//! - [`adaptive`]: extra sample points where new objects appear, per cell;
-//! - [`probe`]: rays aimed at the objects a cell might see, to find those its points miss;
+//! - [`sampler`]: where a cell is measured besides its corners, one file per sampler (interior
+//!   points, adaptive points where new objects appear, rays aimed at what a cell might see);
+//! - [`rays`]: single rays through a scene, for the samplers that cast them;
 //! - [`precompute`]: from-region DoV of objects and tree nodes for every cell of a view grid.
 
-pub mod adaptive;
 pub mod cpu;
 pub mod cubemap;
 pub mod gpu;
 pub mod precompute;
-pub mod probe;
+pub mod rays;
+pub mod sampler;
 pub mod sampling;
 
 use std::collections::HashMap;
@@ -186,9 +187,9 @@ pub trait DovBackend {
         Ok(ids.dov(self.cube_map()))
     }
 
-    /// Single rays through the same scene, for [`probe`]; `None` where the backend has none
+    /// Single rays through the same scene, for ray probing ([`sampler`]); `None` where the backend has none
     /// (the GPU backend draws whole cube maps).
-    fn ray_caster(&self) -> Option<&dyn probe::RayCaster> {
+    fn ray_caster(&self) -> Option<&dyn rays::RayCaster> {
         None
     }
 }
@@ -228,7 +229,7 @@ impl DovBackend for WithRays {
     fn measure(&mut self, p: Vec3) -> Result<PointDov> {
         self.measuring.measure(p)
     }
-    fn ray_caster(&self) -> Option<&dyn probe::RayCaster> {
+    fn ray_caster(&self) -> Option<&dyn rays::RayCaster> {
         Some(&self.rays)
     }
 }

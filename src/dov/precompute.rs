@@ -1,7 +1,7 @@
 //! From-region DoV for every cell of a view grid (thesis §5.2, §5.5; docs/dov.md, "From-region DoV").
 //!
 //! Per cell, the sample points are its 8 corners (shared with the neighbouring cells and measured
-//! once each) plus, optionally, K interior points. Then:
+//! once each) plus those of the build's samplers ([`super::sampler`]). Then:
 //! - object DoV = max over the sample points of the point DoV;
 //! - node DoV = max over the sample points of the *sum* of the point DoVs of the objects under the
 //!   node (the max of sums, which stays ≤ 1; not the sum of maxima);
@@ -18,13 +18,12 @@ use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 
-use super::adaptive::{AdaptiveSampling, sample_cell};
-use super::probe::{Leads, RayProbing, probe_cell, region_finds};
-use super::sampling::{RegionSequence, interior_points, is_inside, seen_by};
+use super::sampler::{CellSampler, CellSite, Tally};
+use super::sampling::{is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
-use crate::format::params::VisibilityParams;
+use crate::format::params::{Sampling, VisibilityParams};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 use crate::progress::Report;
@@ -118,15 +117,9 @@ impl FloorTest {
 /// Options of a precomputation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PrecomputeOptions {
-    /// Interior sample points per cell besides the 8 corners (Halton points in bases 2, 3, 5:
-    /// well spread, the same relative positions in every cell). 0 = corners only (the thesis).
-    pub interior_samples: u32,
-    /// After the corners and the fixed interior points, measure more points where new objects
-    /// appear ([`super::adaptive`]). `None`: no adaptive points.
-    pub adaptive: Option<AdaptiveSampling>,
-    /// After all measured points, aim rays at the objects the cell might see and no point saw
-    /// ([`super::probe`]; needs a backend with [`DovBackend::ray_caster`]). `None`: no probing.
-    pub probe: Option<RayProbing>,
+    /// The samplers that measure each cell besides its 8 corners, run in turn (each sees the
+    /// points the ones before it measured). Empty: the corners alone (the thesis).
+    pub samplers: Vec<Sampling>,
     /// Objects that no sample point sees but any of these tests finds possibly visible get the
     /// one-texel floor. Empty: no floor.
     pub zero_dov_tests: Vec<FloorTest>,
@@ -137,13 +130,11 @@ pub struct PrecomputeOptions {
 }
 
 /// The corners alone, with both floors: the thesis's sampling (a build's default sampler is
-/// [`crate::format::params::Sampling::default`]: [`PrecomputeOptions::of`]).
+/// [`Sampling::default`]: [`PrecomputeOptions::of`]).
 impl Default for PrecomputeOptions {
     fn default() -> Self {
         Self {
-            interior_samples: 0,
-            adaptive: None,
-            probe: None,
+            samplers: Vec::new(),
             zero_dov_tests: vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
             skip_inside_points: true,
         }
@@ -153,52 +144,18 @@ impl Default for PrecomputeOptions {
 impl PrecomputeOptions {
     /// What a build with `v` measures.
     pub fn of(v: &VisibilityParams) -> Self {
-        PrecomputeOptions {
-            interior_samples: v.sampling.interior_samples(),
-            adaptive: v.sampling.adaptive(),
-            probe: v.sampling.probe(),
-            zero_dov_tests: v.zero_dov_floor.clone(),
-            ..Default::default()
-        }
+        PrecomputeOptions { samplers: vec![v.sampling], zero_dov_tests: v.zero_dov_floor.clone(), ..Default::default() }
+    }
+
+    /// The corners and `sampling`, with both floors.
+    pub fn sampled(sampling: Sampling) -> Self {
+        PrecomputeOptions { samplers: vec![sampling], ..Default::default() }
     }
 
     fn uses_neighbours(&self) -> bool {
         self.zero_dov_tests.contains(&FloorTest::NeighbourCorners)
     }
 }
-
-/// The corner ids of the cells within `ring` cells of cell `c` (ring 1: the 4 × 4 × 4 block of
-/// its own 8 corners and those of its 26 neighbours; ring 0: its own 8), clipped to the grid.
-pub fn neighbourhood_corners(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usize> {
-    block(|a| c[a].saturating_sub(ring)..=(c[a] + 1 + ring).min(grid.dims[a]), |p| grid.corner_id(p))
-}
-
-/// The ids `id` gives the lattice points of the box whose range along each axis is `range(axis)`,
-/// x fastest, then z, then y.
-fn block(range: impl Fn(usize) -> std::ops::RangeInclusive<u32>, id: impl Fn([u32; 3]) -> usize) -> Vec<usize> {
-    let mut out = Vec::new();
-    for y in range(1) {
-        for z in range(2) {
-            for x in range(0) {
-                out.push(id([x, y, z]));
-            }
-        }
-    }
-    out
-}
-
-/// How many rings of neighbouring cells' region finds are a cell's probe candidates.
-pub const REGION_RING: u32 = 8;
-
-/// The ids of the cells within `ring` cells of cell `c` (itself included), clipped to the grid.
-pub fn neighbourhood_cells(grid: &ViewGrid, c: [u32; 3], ring: u32) -> Vec<usize> {
-    block(|a| c[a].saturating_sub(ring)..=(c[a] + ring).min(grid.dims[a] - 1), |p| grid.cell_id(p))
-}
-
-/// How many rings of neighbouring cells' corners give [`PrecomputeOptions::probe`] its candidates:
-/// on the audit scene two rings left 33 % fewer pairs unfound than one, three rings 16 % fewer
-/// again at 30 % more rays (docs/dov.md, "Ray probing").
-pub const PROBE_CANDIDATE_RING: u32 = 2;
 
 /// The output of one shard.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -209,21 +166,21 @@ pub struct ShardDov {
     pub points_measured: usize,
     /// Cube-map resolution of the measurements.
     pub resolution: u32,
-    /// Rays cast by [`PrecomputeOptions::probe`] towards targets, and to measure footprints.
+    /// Rays cast by ray probing towards targets, and to measure footprints.
     pub probe_rays: u64,
     pub footprint_rays: u64,
 }
 
 /// Computes the [`CellDov`] of every cell of `shard`.
 ///
-/// Every corner that a shard cell uses — its own 8, plus its neighbours' with
-/// [`FloorTest::NeighbourCorners`] — is measured exactly once and kept until the last cell that
-/// uses it is done (memory: about two layers of corners, four with the neighbour test); interior
-/// points are measured once per cell. `progress` is set to `(points done, points total)`
-/// after each measurement (with [`PrecomputeOptions::adaptive`] the total grows as cells take
-/// more than their seeds). Costs (distinct corners + K·cells + adaptive points) backend
-/// measurements plus, per cell,
-/// O(visible objects × tree depth × points + objects) for the floor tests.
+/// Every corner that a shard cell uses — its own 8, plus its neighbours' within the widest ring
+/// that a sampler ([`CellSampler::corner_ring`]) or [`FloorTest::NeighbourCorners`] reads — is
+/// measured exactly once and kept until the last cell that uses it is done (memory: about two
+/// layers of corners, four with the neighbour test); then each sampler adds the cell's points.
+/// `progress` is set to `(points done, points total)` after each measurement (the total grows
+/// where a sampler takes more than it planned). Costs (distinct corners + the samplers' points)
+/// backend measurements plus, per cell, O(visible objects × tree depth × points + objects) for
+/// the floor tests.
 pub fn precompute_shard(
     backend: &mut dyn DovBackend,
     grid: &ViewGrid,
@@ -239,22 +196,9 @@ pub fn precompute_shard(
         return Err(Error::bad_param(Param::Shard, format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
     let cells = shard.cells(grid);
-    // The adaptive sampler and the probes take their candidates from the neighbours' corners too;
-    // the probes from two rings of them.
-    let ring = if options.probe.is_some() {
-        PROBE_CANDIDATE_RING
-    } else {
-        u32::from(options.uses_neighbours() || options.adaptive.is_some())
-    };
-    if let Some(p) = options.probe
-        && backend.ray_caster().is_none()
-    {
-        return Err(Error::bad_param(
-            Param::Samples,
-            format!("{p} casts single rays: the {} backend has none (use the cpu backend)", backend.name()),
-        ));
-    }
-    let corners_of = |coords: [u32; 3]| neighbourhood_corners(grid, coords, ring);
+    let mut samplers: Vec<Box<dyn CellSampler>> = options.samplers.iter().map(Sampling::sampler).collect();
+    let ring = samplers.iter().map(|s| s.corner_ring()).chain([u32::from(options.uses_neighbours())]).max().unwrap_or(0);
+    let corners_of = |coords: [u32; 3]| grid.neighbourhood_corners(coords, ring);
     // How many shard cells still need each corner: drop a corner's DoV after its last cell.
     let mut corner_uses: HashMap<usize, u32> = HashMap::new();
     for id in cells.clone() {
@@ -262,33 +206,14 @@ pub fn precompute_shard(
             *corner_uses.entry(c).or_insert(0) += 1;
         }
     }
-    // The adaptive sampler's count is known only when it stops: plan with its seeds.
-    let per_cell = options.interior_samples + options.adaptive.map_or(0, |a| a.seeds);
-    let mut total = corner_uses.len() + cells.len() * per_cell as usize;
-    let mut done = 0;
+    let per_cell: u32 = samplers.iter().map(|s| s.planned_points()).sum();
+    let mut tally = Tally::new(corner_uses.len() + cells.len() * per_cell as usize, progress);
+    for sampler in &mut samplers {
+        sampler.prepare(backend, grid, cells.clone(), &mut tally)?;
+    }
     let mut corner_dov: HashMap<usize, PointDov> = HashMap::new();
     let cube = backend.cube_map().clone();
-    let mut out = ShardDov {
-        cells: Vec::with_capacity(cells.len()),
-        points_measured: 0,
-        resolution: cube.resolution(),
-        probe_rays: 0,
-        footprint_rays: 0,
-    };
-    // Region rays, for the shard's cells and their neighbours: what a cell's rays meet it sees,
-    // and its neighbours probe for (an object seen from part of a cell is the likeliest to be
-    // seen from part of the next, where that cell's own rays may have missed it).
-    let mut region: HashMap<usize, Vec<(u32, Vec3)>> = HashMap::new();
-    if let (Some(probing), Some(caster)) = (options.probe.filter(|p| p.region > 0), backend.ray_caster()) {
-        let mut ids: Vec<usize> = cells.clone().flat_map(|id| neighbourhood_cells(grid, grid.cell_coords(id), REGION_RING)).collect();
-        ids.sort_unstable();
-        ids.dedup();
-        let sequence = RegionSequence::new(probing.region);
-        for id in ids {
-            region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), &sequence));
-            out.probe_rays += u64::from(probing.region);
-        }
-    }
+    let mut out = ShardDov { cells: Vec::with_capacity(cells.len()), resolution: cube.resolution(), ..Default::default() };
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
@@ -296,89 +221,47 @@ pub fn precompute_shard(
         for &corner in &needed {
             if let Entry::Vacant(slot) = corner_dov.entry(corner) {
                 slot.insert(backend.measure(grid.corner_position(grid.corner_coords(corner)))?);
-                done += 1;
-                progress.set(done as u64, total as u64);
+                tally.measured(false);
             }
-        }
-        let mut interior = Vec::with_capacity(options.interior_samples as usize);
-        for p in interior_points(&cell_box, options.interior_samples) {
-            interior.push(backend.measure(p)?);
-            done += 1;
-            progress.set(done as u64, total as u64);
         }
         let own = grid.cell_corners(coords);
-        if let Some(sampling) = &options.adaptive {
-            let known: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
-            let candidates = seen_by(needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]));
-            let planned = sampling.seeds as usize;
-            let mut taken = 0;
-            let extra = sample_cell(backend, &cell_box, &known, &candidates, sampling, &mut || {
-                done += 1;
-                taken += 1;
-                total += usize::from(taken > planned);
-                progress.set(done as u64, total as u64);
-            })?;
-            interior.extend(extra);
+        let own_dov: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).collect();
+        let nearby: Vec<&PointDov> = needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]).collect();
+        let site = CellSite {
+            id,
+            coords,
+            bounds: cell_box,
+            grid,
+            corners: &own_dov,
+            nearby: &nearby,
+            object_bounds,
+            cube: &cube,
+        };
+        let mut sampled = Vec::new();
+        for sampler in &mut samplers {
+            sampler.sample(backend, &site, &mut sampled, &mut tally)?;
         }
-        if let (Some(probing), Some(caster)) = (&options.probe, backend.ray_caster()) {
-            let seen = seen_by(own.iter().map(|c| &corner_dov[c]).chain(&interior));
-            let mut candidates = seen_by(needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]));
-            candidates
-                .extend((0..object_bounds.len() as u32).filter(|&o| object_bounds[o as usize].intersects(&cell_box)));
-            if probing.region > 0 {
-                // What the neighbours' region rays met, nearest cells first, as many as probing
-                // them would cost the cell's own region rays at most.
-                let cap = (probing.region / (probing.points * probing.rays).max(1)) as usize;
-                let mut ring_of: Vec<(u32, u32)> = neighbourhood_cells(grid, coords, REGION_RING)
-                    .into_iter()
-                    .filter(|&n| n != id)
-                    .flat_map(|n| {
-                        let c = grid.cell_coords(n);
-                        let ring = (0..3).map(|a| c[a].abs_diff(coords[a])).max().unwrap_or(0);
-                        region.get(&n).into_iter().flatten().map(move |f| (ring, f.0))
-                    })
-                    .filter(|&(_, o)| !seen.contains(&o) && !candidates.contains(&o))
-                    .collect();
-                ring_of.sort_unstable();
-                let mut taken = HashSet::new();
-                for (_, o) in ring_of {
-                    if taken.len() == cap {
-                        break;
-                    }
-                    taken.insert(o);
-                }
-                candidates.extend(taken);
-            }
-            // probe_cell skips the seen ones.
-            let mut candidates: Vec<u32> = candidates.into_iter().collect();
-            candidates.sort_unstable();
-            let own = region.get(&id).map_or(&[][..], Vec::as_slice);
-            let leads = Leads { seen: &seen, candidates: &candidates, region: own };
-            let probe = probe_cell(caster, &cube, &cell_box, &leads, object_bounds, probing);
-            out.probe_rays += probe.rays;
-            out.footprint_rays += probe.footprint_rays;
-            interior.extend(probe.points);
-        }
-        let points: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).chain(&interior).collect();
-        // What the neighbouring cells' region rays met counts as seen nearby, as their corners'
-        // views do (the neighbours floor).
-        let region_around: Vec<PointDov> = neighbourhood_cells(grid, coords, 1)
+        let points: Vec<&PointDov> = own_dov.iter().copied().chain(&sampled).collect();
+        // What the samplers found from the neighbouring cells by themselves (region rays) counts
+        // as seen nearby, as their corners' views do (the neighbours floor).
+        let found_around: Vec<PointDov> = grid
+            .neighbourhood_cells(coords, 1)
             .into_iter()
             .filter(|&n| n != id)
-            .filter_map(|n| region.get(&n))
-            .map(|finds| PointDov {
+            .flat_map(|n| samplers.iter().filter_map(move |s| s.found_from(n)))
+            .map(|objects| PointDov {
                 resolution: cube.resolution(),
-                objects: finds.iter().map(|f| (f.0, 0.0)).collect(),
+                objects: objects.into_iter().map(|o| (o, 0.0)).collect(),
                 back_face: 0.0,
                 empty: 0.0,
             })
             .collect();
         let around: Vec<&PointDov> = if ring > 0 {
-            neighbourhood_corners(grid, coords, 1)
+            grid.neighbourhood_corners(coords, 1)
                 .into_iter()
                 .filter(|c| !own.contains(c))
                 .map(|c| &corner_dov[&c])
-                .chain(&region_around)
+                .chain(&found_around)
                 .collect()
         } else {
             Vec::new()
@@ -392,7 +275,9 @@ pub fn precompute_shard(
             }
         }
     }
-    out.points_measured = done;
+    out.points_measured = tally.done();
+    out.probe_rays = tally.probe_rays;
+    out.footprint_rays = tally.footprint_rays;
     Ok(out)
 }
 

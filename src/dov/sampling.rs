@@ -1,7 +1,7 @@
 //! Where a cell is sampled: the one Halton sequence that every sampler draws interior points
 //! from (fixed interior points, adaptive seeds, probe points, the dense reference), and the one
 //! rule that leaves out a measured point lying inside geometry. The samplers themselves are
-//! [`super::precompute`] (corners and interior points), [`super::adaptive`] and [`super::probe`].
+//! [`super::precompute`] and the samplers ([`super::sampler`]).
 
 use std::collections::HashSet;
 
@@ -80,7 +80,7 @@ pub fn halton_point(cell: &Aabb, k: u32) -> Vec3 {
 }
 
 /// The `count` interior sample points of a cell box, Halton points 1 to `count`
-/// ([`super::precompute::PrecomputeOptions::interior_samples`]).
+/// (the `interior` sampler).
 pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
     (1..=count).map(|k| halton_point(cell, k)).collect()
 }

@@ -73,3 +73,21 @@ pub(crate) mod keys {
         BTreeMap::<String, V>::deserialize(d)?.into_iter().map(|(k, v)| Ok((parse(&k)?, v))).collect()
     }
 }
+
+/// `Serialize` and `Deserialize` of `$t` by its `Display` and `FromStr` names.
+macro_rules! serde_by_name {
+    ($t:ty) => {
+        impl serde::Serialize for $t {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                $crate::format::by_name::one::serialize(self, s)
+            }
+        }
+
+        impl<'de> serde::Deserialize<'de> for $t {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                $crate::format::by_name::one::deserialize(d)
+            }
+        }
+    };
+}
+pub(crate) use serde_by_name;

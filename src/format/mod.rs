@@ -13,8 +13,10 @@
 
 pub(crate) mod by_name;
 pub mod catalog;
+pub mod limits;
 pub mod manifest;
 pub mod params;
+pub mod sampling;
 pub mod tree_page;
 
 pub use manifest::{Counts, FileChecksum, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};

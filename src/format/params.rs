@@ -8,30 +8,15 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::by_name::serde_by_name;
+
 use crate::error::{Error, Param, Result};
 use crate::grid::ViewGrid;
 use crate::rtree::TreeAlgorithm;
+pub use super::sampling::{AdaptiveSampling, RayProbing, SamplerSpec, Sampling};
 use hdov_storage::{DovCodec, LayoutKind};
 
-/// Upper bounds of a build. They keep every count inside its on-disk integer and a mistyped
-/// argument from asking for days of work or an allocation the machine cannot make.
-pub mod limits {
-    /// Viewing cells of a grid.
-    pub const MAX_CELLS: u64 = crate::grid::ViewGrid::MAX_CELLS;
-    /// Sample points a build measures: grid corners plus interior points of every cell.
-    pub const MAX_SAMPLE_POINTS: u64 = 1 << 26;
-    /// Interior sample points per cell.
-    pub const MAX_INTERIOR_SAMPLES: u32 = 4096;
-    /// Texels per cube-face edge: 8192 is the 2D texture size every wgpu adapter must offer,
-    /// and a cube map of it already holds 6 · 8192² = 403 M texels.
-    pub const MAX_RESOLUTION: u32 = 8192;
-    /// Smallest tree page: a node header, two entries and the page checksum.
-    pub const MIN_PAGE_SIZE: u32 = 100;
-    /// Largest tree page: 65,534 entries, so a node's entry count fits the V-page layouts' u16.
-    pub const MAX_PAGE_SIZE: u32 = 1 << 21;
-    /// Largest LOD-aware drawing tolerance, in texels.
-    pub const MAX_LOD_DRAW_TOLERANCE: f32 = 64.0;
-}
+pub use super::limits;
 
 /// The fan-out a build uses unless told otherwise, chosen by measurement (docs/query.md): on
 /// the default city it keeps the pages a threshold query reads below the naive method's for
@@ -42,8 +27,7 @@ pub const DEFAULT_FANOUT: u32 = 16;
 /// Which backend to measure with (the CLI's `--backend auto|gpu|cpu`). `Auto` takes the GPU
 /// backend on graphics hardware and the CPU ray caster otherwise: on Mesa's CPU rasterisers the
 /// ray caster measures a city several times faster (docs/dov.md, speed).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BackendKind {
     /// The GPU backend on a hardware adapter, else the CPU backend.
     #[default]
@@ -54,167 +38,34 @@ pub enum BackendKind {
     Cpu,
 }
 
+impl BackendKind {
+    /// Every choice.
+    pub const ALL: [BackendKind; 3] = [BackendKind::Auto, BackendKind::Gpu, BackendKind::Cpu];
+
+    /// The name `--backend` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Auto => "auto",
+            BackendKind::Gpu => "gpu",
+            BackendKind::Cpu => "cpu",
+        }
+    }
+}
+
+hdov_storage::named!(BackendKind, "backend");
+serde_by_name!(BackendKind);
+
+impl std::fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        hdov_storage::names::write_name(*self, f)
+    }
+}
+
 impl std::str::FromStr for BackendKind {
     type Err = Error;
 
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "auto" => Ok(BackendKind::Auto),
-            "gpu" => Ok(BackendKind::Gpu),
-            "cpu" => Ok(BackendKind::Cpu),
-            _ => Err(Error::bad_param(Param::Backend, format!("'{s}': expected auto, gpu or cpu"))),
-        }
-    }
-}
-
-/// Parameters of the adaptive sampler: `seeds` spread points per cell first, at most `budget`
-/// interior points per cell in all. Written `adaptive:SEEDS:BUDGET` (`adaptive` alone is
-/// [`AdaptiveSampling::DEFAULT`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(into = "String", try_from = "String")]
-pub struct AdaptiveSampling {
-    /// Spread points per cell measured first.
-    pub seeds: u32,
-    /// Most interior points per cell in all.
-    pub budget: u32,
-}
-
-impl AdaptiveSampling {
-    /// Two seeds (one point sees past one side of an occluder, two see past both more often),
-    /// at most 16 points: chosen by the audit in docs/dov.md ("Adaptive sampling").
-    pub const DEFAULT: AdaptiveSampling = AdaptiveSampling { seeds: 2, budget: 16 };
-
-    /// `1 ≤ seeds ≤ budget`.
-    pub fn new(seeds: u32, budget: u32) -> std::result::Result<Self, String> {
-        if seeds == 0 || seeds > budget {
-            return Err(format!("adaptive:{seeds}:{budget}: need 1 ≤ SEEDS ≤ BUDGET"));
-        }
-        Ok(Self { seeds, budget })
-    }
-}
-
-impl std::fmt::Display for AdaptiveSampling {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "adaptive:{}:{}", self.seeds, self.budget)
-    }
-}
-
-impl std::str::FromStr for AdaptiveSampling {
-    type Err = String;
-    /// `adaptive` or `adaptive:SEEDS:BUDGET`.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match parse_two_counts(s, "adaptive", "SEEDS:BUDGET")? {
-            None => Ok(Self::DEFAULT),
-            Some((seeds, budget)) => Self::new(seeds, budget),
-        }
-    }
-}
-
-/// Parses `NAME` (`None`: the defaults) or `NAME:A:B` (two counts); `shape` names the counts in
-/// errors (`SEEDS:BUDGET`).
-fn parse_two_counts(s: &str, name: &str, shape: &str) -> std::result::Result<Option<(u32, u32)>, String> {
-    let expected = || format!("'{s}': expected {name} or {name}:{shape}");
-    let Some(rest) = s.strip_prefix(name) else { return Err(expected()) };
-    if rest.is_empty() {
-        return Ok(None);
-    }
-    let count = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("'{s}': '{x}' is not a count"));
-    match rest.strip_prefix(':').and_then(|r| r.split_once(':')) {
-        Some((a, b)) => Ok(Some((count(a)?, count(b)?))),
-        None => Err(expected()),
-    }
-}
-
-impl From<AdaptiveSampling> for String {
-    fn from(a: AdaptiveSampling) -> String {
-        a.to_string()
-    }
-}
-
-impl TryFrom<String> for AdaptiveSampling {
-    type Error = String;
-    fn try_from(s: String) -> std::result::Result<Self, String> {
-        s.parse()
-    }
-}
-
-/// Parameters of ray probing: `points` probe points per cell, `rays` rays from each towards each
-/// unseen candidate, and optionally REGION rays from points spread over the cell in directions
-/// spread over the sphere. Written `probe:POINTS:RAYS[:REGION]` (`probe` alone is
-/// [`RayProbing::DEFAULT`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(into = "String", try_from = "String")]
-pub struct RayProbing {
-    /// Probe points per cell.
-    pub points: u32,
-    /// Rays from each probe point towards each unseen candidate.
-    pub rays: u32,
-    /// Rays from the cell's region in spread directions, whatever they meet first being seen
-    /// (guided visibility sampling's random stage); 0: none.
-    pub region: u32,
-}
-
-impl RayProbing {
-    /// Chosen by the audit in docs/dov.md ("Ray probing").
-    pub const DEFAULT: RayProbing = RayProbing { points: 32, rays: 4, region: 0 };
-
-    /// `--samples region`: probing with 24,576 region rays per cell, the fewest that met issue
-    /// 22's wrong-pixel targets on every street scene (docs/dov.md, "Region rays").
-    pub const REGION: RayProbing = RayProbing { points: 32, rays: 4, region: 24576 };
-
-    /// Most region rays per cell.
-    pub const MAX_REGION: u32 = 1 << 24;
-
-    /// `1 ≤ points ≤ 4096`, `1 ≤ rays ≤ 4096`, `region ≤ 2^24`.
-    pub fn new(points: u32, rays: u32, region: u32) -> std::result::Result<Self, String> {
-        if !(1..=4096).contains(&points) || !(1..=4096).contains(&rays) || region > Self::MAX_REGION {
-            return Err(format!(
-                "probe:{points}:{rays}:{region}: need 1 ≤ POINTS ≤ 4096, 1 ≤ RAYS ≤ 4096 and REGION ≤ {}",
-                Self::MAX_REGION
-            ));
-        }
-        Ok(Self { points, rays, region })
-    }
-}
-
-impl std::fmt::Display for RayProbing {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "probe:{}:{}", self.points, self.rays)?;
-        if self.region > 0 {
-            write!(f, ":{}", self.region)?;
-        }
-        Ok(())
-    }
-}
-
-impl std::str::FromStr for RayProbing {
-    type Err = String;
-    /// `probe`, `probe:POINTS:RAYS` or `probe:POINTS:RAYS:REGION`.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let (two, region) = match s.rsplit_once(':') {
-            Some((head, last)) if head.matches(':').count() == 2 => {
-                let region = last.trim().parse::<u32>().map_err(|_| format!("'{s}': '{last}' is not a count"))?;
-                (head, region)
-            }
-            _ => (s, 0),
-        };
-        match parse_two_counts(two, "probe", "POINTS:RAYS[:REGION]")? {
-            None => Ok(Self::DEFAULT),
-            Some((points, rays)) => Self::new(points, rays, region),
-        }
-    }
-}
-
-impl From<RayProbing> for String {
-    fn from(a: RayProbing) -> String {
-        a.to_string()
-    }
-}
-
-impl TryFrom<String> for RayProbing {
-    type Error = String;
-    fn try_from(s: String) -> std::result::Result<Self, String> {
-        s.parse()
+        hdov_storage::names::parse_name(s).map_err(|r| Error::bad_param(Param::Backend, r))
     }
 }
 
@@ -358,25 +209,21 @@ pub enum InternalLods {
     Thesis,
 }
 
-impl std::fmt::Display for InternalLods {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
+impl InternalLods {
+    /// Both ways.
+    pub const ALL: [InternalLods; 2] = [InternalLods::Hlod, InternalLods::Thesis];
+
+    /// The name `--internal-lods` takes.
+    pub fn name(self) -> &'static str {
+        match self {
             InternalLods::Hlod => "hlod",
             InternalLods::Thesis => "thesis",
-        })
-    }
-}
-
-impl std::str::FromStr for InternalLods {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "hlod" => Ok(InternalLods::Hlod),
-            "thesis" => Ok(InternalLods::Thesis),
-            _ => Err(format!("unknown internal LODs '{s}' (expected hlod or thesis)")),
         }
     }
 }
+
+hdov_storage::named!(InternalLods, "internal LODs");
+hdov_storage::by_names!(InternalLods);
 
 /// Default of [`VisibilityParams::lod_draw_tolerance`] (the GPU backend's LOD-aware drawing): a twentieth of a texel at the face centre.
 /// Half a texel (the issue's first guess) changes some objects' DoV by up to 10 centre texels on a
@@ -416,113 +263,6 @@ impl Default for BuildParams {
     }
 }
 
-/// Where a build samples each cell besides its 8 shared corners: one choice of three.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(into = "SamplingFields", try_from = "SamplingFields")]
-pub enum Sampling {
-    /// This many stratified (Halton) interior points per cell; 0 = the corners alone (the
-    /// thesis's sampling, and the cheap option, `corners`).
-    Interior(u32),
-    /// Adaptive points where new objects appear (`adaptive:SEEDS:BUDGET`).
-    Adaptive(AdaptiveSampling),
-    /// Rays aimed at what the cell's neighbourhood sees (`probe:POINTS:RAYS`).
-    Probe(RayProbing),
-}
-
-/// Region rays by default (decision 98): the fewest wrong pixels from anywhere in a cell, at
-/// under twice the corners' visibility time on street scenes (docs/dov.md).
-impl Default for Sampling {
-    fn default() -> Self {
-        Sampling::Probe(RayProbing::REGION)
-    }
-}
-
-impl Sampling {
-    /// Fixed interior points per cell.
-    pub fn interior_samples(self) -> u32 {
-        if let Sampling::Interior(k) = self { k } else { 0 }
-    }
-
-    /// The adaptive sampler, if chosen.
-    pub fn adaptive(self) -> Option<AdaptiveSampling> {
-        if let Sampling::Adaptive(a) = self { Some(a) } else { None }
-    }
-
-    /// Ray probing, if chosen.
-    pub fn probe(self) -> Option<RayProbing> {
-        if let Sampling::Probe(p) = self { Some(p) } else { None }
-    }
-
-    /// The most interior points a cell can take.
-    pub fn max_points_per_cell(self) -> u32 {
-        self.interior_samples() + self.adaptive().map_or(0, |a| a.budget)
-    }
-}
-
-impl std::fmt::Display for Sampling {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Sampling::Interior(0) => f.write_str("corners"),
-            Sampling::Interior(k) => write!(f, "{k}"),
-            Sampling::Adaptive(a) => a.fmt(f),
-            Sampling::Probe(p) => p.fmt(f),
-        }
-    }
-}
-
-impl std::str::FromStr for Sampling {
-    type Err = String;
-    /// `corners`, a count of interior points, `adaptive[:SEEDS:BUDGET]`,
-    /// `probe[:POINTS:RAYS[:REGION]]` or `region` ([`RayProbing::REGION`]).
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        if s == "corners" {
-            return Ok(Sampling::Interior(0));
-        }
-        if s.starts_with("adaptive") {
-            return s.parse().map(Sampling::Adaptive);
-        }
-        if s.starts_with("probe") {
-            return s.parse().map(Sampling::Probe);
-        }
-        if s == "region" {
-            return Ok(Sampling::Probe(RayProbing::REGION));
-        }
-        s.parse().map(Sampling::Interior).map_err(|_| {
-            format!(
-                "'{s}' is neither 'corners', a number of interior points, adaptive[:SEEDS:BUDGET], probe[:POINTS:RAYS[:REGION]] nor region"
-            )
-        })
-    }
-}
-
-/// [`Sampling`] as the manifest records it: `interior_samples` always, `adaptive` and `probe`
-/// only when chosen, so manifests of other builds read and write unchanged.
-#[derive(Serialize, Deserialize)]
-struct SamplingFields {
-    interior_samples: u32,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    adaptive: Option<AdaptiveSampling>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    probe: Option<RayProbing>,
-}
-
-impl From<Sampling> for SamplingFields {
-    fn from(s: Sampling) -> Self {
-        SamplingFields { interior_samples: s.interior_samples(), adaptive: s.adaptive(), probe: s.probe() }
-    }
-}
-
-impl TryFrom<SamplingFields> for Sampling {
-    type Error = String;
-    fn try_from(f: SamplingFields) -> std::result::Result<Self, String> {
-        match (f.interior_samples, f.adaptive, f.probe) {
-            (k, None, None) => Ok(Sampling::Interior(k)),
-            (0, Some(a), None) => Ok(Sampling::Adaptive(a)),
-            (0, None, Some(p)) => Ok(Sampling::Probe(p)),
-            _ => Err("more than one sampler (interior_samples, adaptive, probe)".into()),
-        }
-    }
-}
 
 /// How DoV is measured and stored.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -531,9 +271,9 @@ pub struct VisibilityParams {
     pub resolution: u32,
     /// Which backend measures the DoV.
     pub backend: BackendKind,
-    /// Where each cell is sampled besides its 8 shared corners (in the manifest as the fields
-    /// `interior_samples`, `adaptive` and `probe`, as before there was one choice).
-    #[serde(flatten)]
+    /// Where each cell is sampled besides its 8 shared corners (the manifest's `sampling`, by
+    /// name).
+    #[serde(flatten, with = "super::sampling::record")]
     pub sampling: Sampling,
     /// Layouts to write.
     #[serde(with = "super::by_name::list")]
@@ -630,22 +370,7 @@ impl BuildParams {
         if !(1..=MAX_RESOLUTION).contains(&v.resolution) {
             return Err(Error::bad_param(Param::Resolution, format!("{} is outside 1..={MAX_RESOLUTION}", v.resolution)));
         }
-        let k = v.sampling.interior_samples();
-        if k > MAX_INTERIOR_SAMPLES {
-            return Err(Error::bad_param(
-                Param::InteriorSamples,
-                format!("{k} is above {MAX_INTERIOR_SAMPLES} per cell"),
-            ));
-        }
-        if let Some(a) = v.sampling.adaptive() {
-            AdaptiveSampling::new(a.seeds, a.budget).map_err(|r| Error::bad_param(Param::InteriorSamples, r))?;
-            if a.budget > MAX_INTERIOR_SAMPLES {
-                return Err(Error::bad_param(
-                    Param::InteriorSamples,
-                    format!("{a}: a budget above {MAX_INTERIOR_SAMPLES} per cell"),
-                ));
-            }
-        }
+        v.sampling.check()?;
         if v.layouts.is_empty() {
             return Err(Error::bad_param(Param::Layouts, "names no layout"));
         }
@@ -730,28 +455,29 @@ mod tests {
         assert_eq!(v["zero_dov_floor"], serde_json::json!(["box:2.5", "neighbours"]));
         assert_eq!(v["shard"], serde_json::json!([1, 3]));
         assert_eq!(v["dov_codec"], "log-u16");
-        assert_eq!(v["adaptive"], "adaptive:3:24");
-        assert_eq!(v["interior_samples"], 0);
+        assert_eq!(v["sampling"], "adaptive:3:24");
+        assert!(v.get("interior_samples").is_none() && v.get("adaptive").is_none());
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
-        let p = with(Sampling::Probe(RayProbing { points: 16, rays: 2, region: 0 }));
-        let json = serde_json::to_value(&p).unwrap();
-        assert_eq!(json["visibility"]["probe"], "probe:16:2");
-        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
-        let p = with(Sampling::Probe(RayProbing { points: 32, rays: 4, region: 32768 }));
-        let json = serde_json::to_value(&p).unwrap();
-        assert_eq!(json["visibility"]["probe"], "probe:32:4:32768");
-        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
-        let p = with(Sampling::Interior(5));
-        let json = serde_json::to_value(&p).unwrap();
-        assert_eq!(json["visibility"]["interior_samples"], 5);
-        assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+        for (sampling, name) in [
+            (Sampling::Probe(RayProbing { points: 16, rays: 2, region: 0 }), "probe:16:2"),
+            (Sampling::Probe(RayProbing { points: 32, rays: 4, region: 32768 }), "probe:32:4:32768"),
+            (Sampling::Interior(5), "5"),
+            (Sampling::CORNERS, "corners"),
+        ] {
+            let p = with(sampling);
+            let json = serde_json::to_value(&p).unwrap();
+            assert_eq!(json["visibility"]["sampling"], name);
+            assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
+        }
     }
 
     #[test]
     fn a_manifest_naming_two_samplers_is_refused() {
         let mut json = serde_json::to_value(BuildParams::default()).unwrap();
-        json["visibility"]["interior_samples"] = serde_json::json!(4);
         json["visibility"]["probe"] = serde_json::json!("probe:8:2");
+        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("more than one sampler"));
+        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
+        json["visibility"]["interior_samples"] = serde_json::json!(4);
         assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("more than one sampler"));
     }
 
@@ -763,32 +489,39 @@ mod tests {
         assert_eq!("adaptive".parse::<Sampling>().unwrap(), Sampling::Adaptive(AdaptiveSampling::DEFAULT));
         assert_eq!("probe:32:4:0".parse::<Sampling>().unwrap().to_string(), "probe:32:4");
         assert_eq!("region".parse::<Sampling>().unwrap().to_string(), "probe:32:4:24576");
-        assert!("halton".parse::<Sampling>().is_err());
+        let unknown = "halton".parse::<Sampling>().unwrap_err();
+        assert!(unknown.contains("adaptive[:SEEDS:BUDGET]") && unknown.contains("region"), "{unknown}");
         for bad in ["probe:32:4:many", "probe:32:4:-1", "probe:32:4:16777217", "probe:32:4:5:6", "probe:32"] {
             assert!(bad.parse::<Sampling>().is_err(), "{bad}");
         }
     }
 
     #[test]
-    fn manifests_without_adaptive_sampling_read_and_write_unchanged() {
-        // A corner-only build writes what manifests held before there were other samplers, and
-        // such a manifest reads back as corners (not as today's default).
-        let mut corners = BuildParams::default();
-        corners.visibility.as_mut().unwrap().sampling = Sampling::Interior(0);
-        let json = serde_json::to_value(&corners).unwrap();
-        assert!(json["visibility"].get("adaptive").is_none());
-        assert!(json["visibility"].get("probe").is_none());
-        let back = serde_json::from_value::<BuildParams>(json).unwrap().visibility.unwrap().sampling;
-        assert_eq!(back, Sampling::Interior(0));
-        // The default (region rays) is written out.
+    fn manifests_written_before_the_sampling_field_still_read() {
+        // Up to decision 101 the manifest named the sampler in up to three fields:
+        // `interior_samples` always, `adaptive` and `probe` when chosen.
+        let earlier = |fields: serde_json::Value| {
+            let mut json = serde_json::to_value(BuildParams::default()).unwrap();
+            let v = json["visibility"].as_object_mut().unwrap();
+            v.remove("sampling");
+            v.extend(fields.as_object().unwrap().clone());
+            serde_json::from_value::<BuildParams>(json).map(|p| p.visibility.unwrap().sampling)
+        };
+        assert_eq!(earlier(serde_json::json!({ "interior_samples": 0 })).unwrap(), Sampling::CORNERS);
+        assert_eq!(earlier(serde_json::json!({ "interior_samples": 5 })).unwrap(), Sampling::Interior(5));
+        assert_eq!(
+            earlier(serde_json::json!({ "interior_samples": 0, "adaptive": "adaptive:3:24" })).unwrap(),
+            Sampling::Adaptive(AdaptiveSampling { seeds: 3, budget: 24 })
+        );
+        assert_eq!(
+            earlier(serde_json::json!({ "interior_samples": 0, "probe": "probe:32:4:24576" })).unwrap(),
+            Sampling::Probe(RayProbing::REGION)
+        );
+        assert!(earlier(serde_json::json!({ "interior_samples": 0, "adaptive": "adaptive:0:3" })).unwrap_err().to_string().contains("SEEDS"));
+        assert!(earlier(serde_json::json!({ "interior_samples": 0, "probe": "probe:0:3" })).unwrap_err().to_string().contains("POINTS"));
+        // The default (region rays) is written by name.
         let json = serde_json::to_value(BuildParams::default()).unwrap();
-        assert_eq!(json["visibility"]["probe"], "probe:32:4:24576");
-        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
-        json["visibility"]["adaptive"] = serde_json::json!("adaptive:0:3");
-        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("SEEDS"));
-        let mut json = serde_json::to_value(BuildParams::default()).unwrap();
-        json["visibility"]["probe"] = serde_json::json!("probe:0:3");
-        assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("POINTS"));
+        assert_eq!(json["visibility"]["sampling"], "probe:32:4:24576");
     }
 
     #[test]

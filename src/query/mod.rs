@@ -11,10 +11,12 @@
 //! Every tree page and V-page is read through the database's page access (`db::access`),
 //! which counts what each query reads per file.
 
+mod levels;
+mod select;
 pub mod session;
 mod traverse;
 
-pub use traverse::visibility_bias;
+pub use levels::visibility_bias;
 
 use std::fmt;
 use std::str::FromStr;
@@ -27,6 +29,7 @@ pub use crate::camera::Camera;
 use crate::db::Database;
 use crate::db::access::{Access, PageIo};
 use crate::error::{Error, Param, Result};
+use crate::format::by_name::serde_by_name;
 use crate::format::catalog::LodRef;
 use crate::geom::Aabb;
 use hdov_storage::LayoutKind;
@@ -44,8 +47,7 @@ pub const MAX_DOV: f64 = 0.5;
 pub const DEFAULT_ETA: f64 = 3e-2;
 
 /// How a query chooses what to return.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Mode {
     /// The HDoV-tree traversal: hidden subtrees skipped, subtrees with DoV ≤ η returned as one
     /// internal LOD where that draws fewer faces than their visible objects (eq. 5.3–5.6), the
@@ -78,21 +80,9 @@ impl Mode {
     }
 }
 
-impl fmt::Display for Mode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Mode {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Mode, String> {
-        Mode::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown mode '{s}' (threshold, naive, budget, vmsse, frustum)"))
-    }
-}
+hdov_storage::named!(Mode, "mode");
+hdov_storage::by_names!(Mode);
+serde_by_name!(Mode);
 
 /// How a query picks the level of detail of each object it returns and of each subtree it
 /// stops at (docs/query.md, "Levels of detail").
@@ -178,14 +168,30 @@ impl Default for QueryParams {
 }
 
 /// An object or a tree node (drawn as its internal LOD).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ItemKind {
     /// An object of the scene at one of its leaf LODs.
     Object,
     /// A tree node drawn as one of its internal LODs.
     Node,
 }
+
+impl ItemKind {
+    /// Both kinds.
+    pub const ALL: [ItemKind; 2] = [ItemKind::Object, ItemKind::Node];
+
+    /// The kind's name in answers.
+    pub fn name(self) -> &'static str {
+        match self {
+            ItemKind::Object => "object",
+            ItemKind::Node => "node",
+        }
+    }
+}
+
+hdov_storage::named!(ItemKind, "item kind");
+hdov_storage::by_names!(ItemKind);
+serde_by_name!(ItemKind);
 
 /// One thing to draw.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -304,6 +310,14 @@ impl Answer {
 }
 
 impl Database {
+    /// Starts a VISUAL walkthrough session. Checks the parameters; reads nothing yet.
+    pub fn session(&self, params: &SessionParams) -> Result<Session<'_>> {
+        session::check_camera(params)?;
+        let limits = hdov_storage::CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
+        let access = Access::cached(self, params.query.layout, limits, params.cache)?;
+        Ok(Session::new(self, params, access, Box::new(session::Visual { query: params.query })))
+    }
+
     /// Answers a point query from `at`.
     ///
     /// Errors (one line, naming the parameter): `at` not finite or outside the grid, η outside

@@ -21,7 +21,7 @@ use crate::db::Database;
 use crate::db::access::Access;
 use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
-use hdov_storage::{CacheLimits, PolicyKind};
+use hdov_storage::PolicyKind;
 
 /// Steps ahead along the current motion that prefetch looks (one step is one path point).
 pub const PREFETCH_STEPS: f32 = 3.0;
@@ -150,8 +150,8 @@ pub(crate) trait CellMethod {
 
 /// VISUAL: on each cell flip, the HDoV-tree query of the session's [`QueryParams`] for the
 /// whole cell; a frame draws the answer culled to its camera.
-struct Visual {
-    query: QueryParams,
+pub(super) struct Visual {
+    pub query: QueryParams,
 }
 
 impl CellMethod for Visual {
@@ -220,16 +220,6 @@ pub struct Session<'db> {
     resident: LruCache<u64, Box<[u8]>>,
     resident_bytes: u64,
     steps: u64,
-}
-
-impl Database {
-    /// Starts a VISUAL walkthrough session. Checks the parameters; reads nothing yet.
-    pub fn session(&self, params: &SessionParams) -> Result<Session<'_>> {
-        check_camera(params)?;
-        let limits = CacheLimits { pages: params.cache_pages, bytes: params.cache_bytes };
-        let access = Access::cached(self, params.query.layout, limits, params.cache)?;
-        Ok(Session::new(self, params, access, Box::new(Visual { query: params.query })))
-    }
 }
 
 /// Refuses a session camera that cannot be used.

@@ -12,9 +12,7 @@
 pub mod fidelity;
 
 use std::collections::HashMap;
-use std::fmt;
 use std::path::Path;
-use std::str::FromStr;
 
 use glam::{Mat4, Vec3};
 
@@ -155,21 +153,8 @@ impl ColorMode {
     }
 }
 
-impl fmt::Display for ColorMode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for ColorMode {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<ColorMode, String> {
-        ColorMode::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown colour mode '{s}' (shaded, dov, lod)"))
-    }
-}
+hdov_storage::named!(ColorMode, "colour mode");
+hdov_storage::by_names!(ColorMode);
 
 /// The grey of [`ColorMode::Shaded`].
 pub const GREY: [u8; 3] = [200, 200, 200];

@@ -50,25 +50,24 @@ pub enum TreeAlgorithm {
     Linear,
 }
 
-impl std::str::FromStr for TreeAlgorithm {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "str" => Ok(Self::Str),
-            "linear" => Ok(Self::Linear),
-            _ => Err(format!("unknown tree algorithm '{s}' (expected str or linear)")),
+/// Manifests record the variant (`"Str"`, serde's derive) since format 1; names are for
+/// command lines.
+impl hdov_storage::Named for TreeAlgorithm {
+    const WHAT: &'static str = "tree algorithm";
+
+    fn all() -> &'static [Self] {
+        &[TreeAlgorithm::Str, TreeAlgorithm::Linear]
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Str => "str",
+            Self::Linear => "linear",
         }
     }
 }
 
-impl std::fmt::Display for TreeAlgorithm {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Str => "str",
-            Self::Linear => "linear",
-        })
-    }
-}
+hdov_storage::by_names!(TreeAlgorithm);
 
 /// An R-tree whose node ids are depth-first numbers (root = 0).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

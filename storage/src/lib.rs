@@ -24,6 +24,7 @@ pub mod io_stats;
 pub mod layout;
 mod le;
 pub mod mutation;
+pub mod names;
 pub mod page_reader;
 pub mod pagefile;
 pub mod synthetic;
@@ -38,6 +39,7 @@ pub use layout::{
     FlipCost, Layout, LayoutCursor, LayoutKind, LayoutOptions, LayoutSize, LayoutSummary, LayoutWriter, VShape,
     write_layout,
 };
+pub use names::Named;
 pub use page_reader::PageReader;
 pub use pagefile::{FORMAT_VERSION, PageFile, PageFileWriter, ReadMode};
 pub use vpage::{DovCodec, VData, VDataStats, VEntry, VPageCodec};

@@ -25,7 +25,6 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use crate::error::{Error, Result, path_str};
 use crate::le::{tag_str, u32_at, u64_at};
-use crate::page_reader::PageReader;
 
 /// The page file format's magic number.
 pub const PAGE_MAGIC: [u8; 8] = *b"HDOVPAGE";
@@ -185,7 +184,7 @@ enum Backing {
 /// opens).
 static NEXT_ID: AtomicU32 = AtomicU32::new(0);
 
-/// A read-only page file. Its pages are read through a [`PageReader`], which counts every
+/// A read-only page file. Its pages are read through a [`PageReader`](crate::page_reader::PageReader), which counts every
 /// request and every read (the file itself counts nothing). Immutable after open, so it is
 /// `Send + Sync`: any number of readers on any threads may read it at once.
 pub struct PageFile {
@@ -289,7 +288,8 @@ impl PageFile {
     }
 
     /// The payload of data page `n` (capacity bytes), checksum verified: one read from the
-    /// file. Only [`PageReader::page`] calls it, so that every read is counted in one place.
+    /// file. Only [`PageReader::page`](crate::page_reader::PageReader::page) calls it, so that
+    /// every read is counted in one place, and [`PageFile::verify`], whose reads count nowhere.
     pub(crate) fn read_page(&self, n: u64) -> Result<Cow<'_, [u8]>> {
         if n >= self.page_count {
             return Err(Error::invalid(
@@ -333,10 +333,9 @@ impl PageFile {
         })
     }
 
-    /// Reads every page, checking each checksum (through a reader of its own, with no cache).
+    /// Reads every page, checking each checksum, past any cache and uncounted.
     pub fn verify(&self) -> Result<()> {
-        let mut pages = PageReader::uncached();
-        (0..self.page_count).try_for_each(|n| pages.page(self, n, 0.0).map(drop))
+        (0..self.page_count).try_for_each(|n| self.read_page(n).map(drop))
     }
 }
 

@@ -4,9 +4,6 @@
 //! On disk a V-entry is its DoV (f32, or u16 on a log scale) followed by its NVO (u16 when every
 //! NVO of the layout fits, else u32), little-endian, with no padding.
 
-use std::fmt;
-use std::str::FromStr;
-
 /// One tree entry's view-variant data for one cell.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct VEntry {
@@ -137,25 +134,21 @@ impl DovCodec {
     }
 }
 
-impl fmt::Display for DovCodec {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
+impl DovCodec {
+    /// Both codecs.
+    pub const ALL: [DovCodec; 2] = [DovCodec::F32, DovCodec::LogU16];
+
+    /// The name used on the command line and in manifests.
+    pub fn name(self) -> &'static str {
+        match self {
             DovCodec::F32 => "f32",
             DovCodec::LogU16 => "log-u16",
-        })
-    }
-}
-
-impl FromStr for DovCodec {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "f32" => Ok(DovCodec::F32),
-            "log-u16" => Ok(DovCodec::LogU16),
-            _ => Err(format!("unknown DoV codec {s:?} (f32, log-u16)")),
         }
     }
 }
+
+crate::named!(DovCodec, "DoV codec");
+crate::by_names!(DovCodec);
 
 /// The smallest non-zero DoV the log scale represents: 2^-32 ≈ 2.3e-10, far below one texel
 /// of any practical cube map (1.2e-6 at R = 512, 7.6e-8 at R = 2048). Smaller positive DoVs

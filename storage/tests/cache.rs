@@ -5,11 +5,10 @@
 use std::sync::Arc;
 
 use hdov_storage::cache::{DEFAULT_GAMMA, DEFAULT_KAPPA, DovTime, Dplru};
-use hdov_storage::{CacheLimits, CachePolicy, CacheStats, Error, PageCache, PageKey, PolicyKind};
+use hdov_storage::{CacheLimits, CachePolicy, CacheStats, Error, Named, PageCache, PageKey, PolicyKind};
 use proptest::prelude::*;
 
-const ALL: [PolicyKind; 5] =
-    [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DOV_TIME, PolicyKind::Dplru];
+const ALL: [PolicyKind; 5] = PolicyKind::ALL;
 
 fn key(page: u64) -> PageKey {
     PageKey { file: 0, page }
@@ -371,12 +370,13 @@ fn policy_names_round_trip() {
         assert_eq!(kind.to_string().parse::<PolicyKind>(), Ok(kind));
     }
     let names: Vec<String> = ALL.iter().map(|k| k.to_string()).collect();
-    assert_eq!(names, PolicyKind::NAMES);
+    let named: Vec<&str> = PolicyKind::all().iter().map(|k| Named::name(*k)).collect();
+    assert_eq!(names, named);
     assert_eq!("dov-time".parse(), Ok(PolicyKind::DovTime { kappa: 0.001 }));
     assert_eq!("dov-time:0.01".parse(), Ok(PolicyKind::DovTime { kappa: 0.01 }));
     assert_eq!("dov-time:0.01".parse::<PolicyKind>().unwrap().name(), "dov-time");
     let err = "mru".parse::<PolicyKind>().unwrap_err();
-    assert_eq!(err, r#"unknown cache policy "mru" (none, lru, dov, dov-time, dplru)"#);
+    assert_eq!(err, "unknown cache policy 'mru' (expected none, lru, dov, dov-time or dplru)");
     assert!("dov-time:-1".parse::<PolicyKind>().unwrap_err().contains("kappa"));
     assert!("dov-time:nan".parse::<PolicyKind>().is_err());
 }

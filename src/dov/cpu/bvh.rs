@@ -13,10 +13,30 @@ use obvhs::{
     triangle::Triangle,
 };
 
-use super::trace::Hit;
-use crate::dov::{NO_OBJECT, check_object_count};
+use crate::dov::{BACK_FACE_BIT, NO_OBJECT, check_object_count};
 use crate::error::Result;
 use crate::scene::Scene;
+
+/// obvhs's lower bound on a child's entry distance (its private `EPSILON`).
+pub(super) const NODE_TMIN: f32 = 0.0001;
+
+/// One ray-triangle hit.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Hit {
+    pub(super) t: f32,
+    pub(super) obj: u32,
+    pub(super) back: bool,
+    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
+    pub(super) instance: u32,
+    pub(super) tri: u32,
+}
+
+impl Hit {
+    /// The texel id this hit gives: its object, with [`BACK_FACE_BIT`] when seen from behind.
+    pub(super) fn id(&self) -> u32 {
+        if self.back { self.obj | BACK_FACE_BIT } else { self.obj }
+    }
+}
 
 /// The largest BLAS built with obvhs's very slow preset; bigger ones get the slow preset.
 const VERY_SLOW_BUILD_MAX_TRIANGLES: usize = 1 << 20;

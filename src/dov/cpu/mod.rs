@@ -29,7 +29,7 @@ use obvhs::{
 };
 use rayon::prelude::*;
 
-use super::probe::{RayCaster, SurfaceTargets};
+use super::rays::{RayCaster, SurfaceTargets};
 use super::{CubeMap, DovBackend, IdCube, NO_OBJECT, check_object_count, cubemap};
 use crate::error::{Error, Param, Result};
 use crate::scene::Scene;
@@ -52,7 +52,7 @@ pub const AMBIGUOUS_DEPTH: f32 = 1e-3;
 
 /// Columns and rows of texels the packet tracer takes together: 4 × 8 took 762 M instructions
 /// and 5.0 ms per point on the engine against 786 M and 5.4 ms for 8 × 4 and 885 M and 6.6 ms for
-/// 4 × 4 (docs/dov.md; a tile holds two).
+/// 4 × 4 (docs/journal/packet-tracer.md, §5; a tile holds two).
 pub const PACKET_TEXELS: (usize, usize) = (4, 8);
 
 /// Texels per side of the square tiles the fast path traces one after another.
@@ -82,7 +82,7 @@ pub struct CpuBackend {
     /// Whether [`CpuBackend::trace_band_wide`] traces packets of rays (else one ray at a time).
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     packets: bool,
-    /// Where probe rays aim ([`super::probe`]).
+    /// Where probe rays aim ([`super::rays::SurfaceTargets`]).
     targets: SurfaceTargets,
 }
 
@@ -363,8 +363,7 @@ pub(crate) fn check_cube(out: &IdCube, resolution: u32) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::bvh::RayTriangle;
-    use super::trace::Hit;
+    use super::bvh::{Hit, RayTriangle};
     use super::*;
     use obvhs::{ray::Ray, triangle::Triangle};
     use proptest::prelude::*;

@@ -16,9 +16,8 @@ use std::arch::x86_64::*;
 use glam::{Affine3A, Vec3A};
 use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 
-use super::bvh::RayTriangle;
+use super::bvh::{NODE_TMIN, RayTriangle};
 use crate::dov::cubemap::FaceBasis;
-use super::trace::NODE_TMIN;
 
 /// A packet's texels: `PACKET_COLS` columns of `PACKET_ROWS` rows, lane `row · COLS + col`
 /// ([`super::PACKET_TEXELS`]).

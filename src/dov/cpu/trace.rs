@@ -9,11 +9,11 @@ use obvhs::{
     ray::{Ray, RayHit},
 };
 
-use super::bvh::Instance;
+use super::bvh::{Hit, Instance, NODE_TMIN};
 #[cfg(target_arch = "x86_64")]
 use super::packet;
 use super::{AMBIGUOUS_DEPTH, CpuBackend, TIE_EPSILON, TILE, check_cube, check_point};
-use crate::dov::{BACK_FACE_BIT, IdCube, NO_OBJECT, cubemap};
+use crate::dov::{IdCube, NO_OBJECT, cubemap};
 use crate::error::Result;
 
 /// What the fast path carries from one texel to the next on one thread.
@@ -105,23 +105,6 @@ impl packet::LaneBounds for LaneWindows {
     }
 }
 
-/// One ray-triangle hit.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Hit {
-    pub(super) t: f32,
-    pub(super) obj: u32,
-    pub(super) back: bool,
-    /// Instance and triangle (in its BLAS's order): where the next texel's ray looks first.
-    pub(super) instance: u32,
-    pub(super) tri: u32,
-}
-
-impl Hit {
-    /// The texel id this hit gives: its object, with [`BACK_FACE_BIT`] when seen from behind.
-    pub(super) fn id(&self) -> u32 {
-        if self.back { self.obj | BACK_FACE_BIT } else { self.obj }
-    }
-}
 
 /// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
 /// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
@@ -366,8 +349,6 @@ fn intersect_node<const WIDE: bool>(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) 
     node.intersect_ray(ray, oct_inv4)
 }
 
-/// obvhs's lower bound on a child's entry distance (its private `EPSILON`).
-pub(super) const NODE_TMIN: f32 = 0.0001;
 
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]

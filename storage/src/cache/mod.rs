@@ -147,12 +147,12 @@ pub enum PolicyKind {
     Dplru,
 }
 
-impl PolicyKind {
-    /// Every name [`FromStr`] accepts (`dov-time` also as `dov-time:KAPPA`).
-    pub const NAMES: [&'static str; 5] = ["none", "lru", "dov", "dov-time", "dplru"];
+crate::named!(PolicyKind, "cache policy");
 
-    /// DoV-Time with the thesis's κ = 0.001.
-    pub const DOV_TIME: PolicyKind = PolicyKind::DovTime { kappa: DEFAULT_KAPPA };
+impl PolicyKind {
+    /// Every kind, `dov-time` with the default κ ([`FromStr`] also takes `dov-time:KAPPA`).
+    pub const ALL: [PolicyKind; 5] =
+        [PolicyKind::None, PolicyKind::Lru, PolicyKind::Dov, PolicyKind::DOV_TIME, PolicyKind::Dplru];
 
     /// The name used on the command line (without κ).
     pub fn name(self) -> &'static str {
@@ -164,6 +164,9 @@ impl PolicyKind {
             PolicyKind::Dplru => "dplru",
         }
     }
+
+    /// DoV-Time with the thesis's κ = 0.001.
+    pub const DOV_TIME: PolicyKind = PolicyKind::DovTime { kappa: DEFAULT_KAPPA };
 
     /// A fresh policy of this kind.
     pub fn build(self) -> Box<dyn CachePolicy + Send> {
@@ -182,7 +185,7 @@ impl fmt::Display for PolicyKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             PolicyKind::DovTime { kappa } if kappa != DEFAULT_KAPPA => write!(f, "dov-time:{kappa}"),
-            kind => f.write_str(kind.name()),
+            kind => crate::names::write_name(kind, f),
         }
     }
 }
@@ -190,19 +193,12 @@ impl fmt::Display for PolicyKind {
 impl FromStr for PolicyKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "none" => Ok(PolicyKind::None),
-            "lru" => Ok(PolicyKind::Lru),
-            "dov" => Ok(PolicyKind::Dov),
-            "dov-time" => Ok(PolicyKind::DOV_TIME),
-            "dplru" => Ok(PolicyKind::Dplru),
-            _ => match s.strip_prefix("dov-time:") {
-                Some(k) => match k.parse::<f64>() {
-                    Ok(kappa) if kappa.is_finite() && kappa >= 0.0 => Ok(PolicyKind::DovTime { kappa }),
-                    _ => Err(format!("cache policy {s:?}: kappa must be a finite number >= 0")),
-                },
-                None => Err(format!("unknown cache policy {s:?} (none, lru, dov, dov-time, dplru)")),
+        match s.strip_prefix("dov-time:") {
+            Some(k) => match k.parse::<f64>() {
+                Ok(kappa) if kappa.is_finite() && kappa >= 0.0 => Ok(PolicyKind::DovTime { kappa }),
+                _ => Err(format!("cache policy {s:?}: kappa must be a finite number >= 0")),
             },
+            None => crate::names::parse_name(s),
         }
     }
 }

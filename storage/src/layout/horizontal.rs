@@ -8,8 +8,8 @@
 //! capacity⌉` when a V-page exceeds a page). `first(n)` follows from the fan-outs (the thesis
 //! keeps it as a pointer in the node); hidden nodes' slots are zero.
 
+use super::context::{Tally, WriteCtx};
 use super::packing::{Addr, PagedFile, SlotArray, rewrite_front};
-use super::writer::{Tally, WriteCtx};
 use super::{LayoutKind, LayoutSize, Meta, layout_size};
 use crate::error::Result;
 use crate::pagefile::PageFileWriter;

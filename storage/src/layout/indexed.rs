@@ -7,9 +7,9 @@
 //! `count` × [u32 node, u32 page, u16 offset] sorted by node; `vpages.indexed-vertical` =
 //! as `vpages.vertical`.
 
+use super::context::{Tally, WriteCtx};
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, record_pages};
-use super::vertical::CellVPageWriter;
-use super::writer::{Tally, WriteCtx};
+use super::vertical::{CellVPageWriter, finish};
 use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY};
 use crate::error::Result;
 use crate::le::u32_at;
@@ -80,7 +80,7 @@ impl Writer {
         let (flips, tally, start, dir) =
             ((self.flip_total, self.flip_max), self.tally, self.data_start, self.directory);
         let meta = |vp_pages| w.meta(LayoutKind::IndexedVertical, start, vp_pages, tally, flips, dir);
-        w.finish_vertical(self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
+        finish(w, self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
     }
 }
 

@@ -12,6 +12,7 @@
 //! counts, V-entry codec, fan-outs, summary counts; for indexed-vertical also the per-cell
 //! directory), read once at open. `docs/storage-format.md` gives every byte.
 
+mod context;
 mod horizontal;
 mod indexed;
 mod packing;
@@ -20,7 +21,6 @@ mod writer;
 
 use std::fmt;
 use std::path::Path;
-use std::str::FromStr;
 
 use crate::error::{Error, Result};
 use crate::le::{u32_at, u64_at};
@@ -37,6 +37,9 @@ pub enum LayoutKind {
     Vertical,
     IndexedVertical,
 }
+
+crate::named!(LayoutKind, "layout");
+crate::by_names!(LayoutKind);
 
 impl LayoutKind {
     pub const ALL: [LayoutKind; 3] = [LayoutKind::Horizontal, LayoutKind::Vertical, LayoutKind::IndexedVertical];
@@ -65,22 +68,6 @@ impl LayoutKind {
             LayoutKind::Vertical => 1,
             LayoutKind::IndexedVertical => 2,
         }
-    }
-}
-
-impl fmt::Display for LayoutKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for LayoutKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        LayoutKind::ALL
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown layout {s:?} (horizontal, vertical, indexed-vertical)"))
     }
 }
 

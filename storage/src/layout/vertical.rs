@@ -8,9 +8,9 @@
 //! each dense or, with sparse encoding on, as the shorter of the two forms of
 //! [`SparseCodec`](crate::vpage::SparseCodec).
 
+use super::context::{Tally, WriteCtx};
 use super::packing::{ADDR_BYTES, Addr, Packer, PagedFile, SlotArray, record_pages};
-use super::writer::{Tally, WriteCtx};
-use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY};
+use super::{LayoutKind, LayoutSize, Meta, SEGMENT_PRIORITY, layout_size};
 use crate::error::Result;
 use crate::page_reader::PageReader;
 use crate::pagefile::PageFileWriter;
@@ -108,7 +108,7 @@ impl Writer {
         let (w, flip) = (&self.w, self.flip);
         let flips = (flip * u64::from(w.cell_count), flip);
         let meta = |vp_pages| w.meta(LayoutKind::Vertical, self.data_start, vp_pages, self.tally, flips, Vec::new());
-        w.finish_vertical(self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
+        finish(w, self.vpages, self.index, meta, [INDEX_FILE, VPAGES_FILE])
     }
 }
 
@@ -173,4 +173,21 @@ impl Segment {
     pub fn locate(&self, node: u32) -> Option<Addr> {
         self.seg.get(node as usize).copied().filter(|&a| a != Addr::NIL)
     }
+}
+
+/// Finishes a vertical layout's two files: the V-pages, then the index with `meta` over its
+/// placeholder.
+pub(super) fn finish(
+    w: &WriteCtx,
+    vpages: CellVPageWriter,
+    index: Packer,
+    meta: impl FnOnce(u64) -> Meta,
+    names: [&str; 2],
+) -> Result<LayoutSize> {
+    let (vp_pages, vp_bytes) = vpages.finish()?;
+    let (_, ix_bytes) = index.finish_with_front(&meta(vp_pages).encode())?;
+    Ok(layout_size(
+        vec![(names[0].to_string(), ix_bytes), (names[1].to_string(), vp_bytes)],
+        vp_pages * u64::from(w.page_size),
+    ))
 }

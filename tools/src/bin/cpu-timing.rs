@@ -5,15 +5,40 @@
 //!
 //! `cargo run --release -p hdov-tools --bin cpu-timing -- SCENE.json [IDS_DUMP_FILE]`
 
+use std::path::PathBuf;
+
+use clap::Parser;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, DovBackend, IdCube};
 use hdov::scene::Scene;
 
+#[derive(Parser)]
+#[command(
+    name = "cpu-timing",
+    about = "CPU backend timing on a scene: BVH build time, time per sample point at R = 128, and a checksum of the id \
+             cubes",
+    long_about = "CPU backend timing on a scene file: the BVH build time, then the time per sample point at R = 128 over\n\
+                  an 8 × 8 lattice of points at eye height (wall clock, and the process's CPU time, which a loaded\n\
+                  machine disturbs less), and a checksum of the id cubes, so that two versions of the backend can be\n\
+                  compared for identical results.\n\
+                  \n\
+                  Makes: docs/dov.md, \"Speed\" (the large city's table: BVH build and CPU time per sample point) and\n\
+                  the default city's before/after figures with identical id checksums in docs/journal/packet-tracer.md, \"Per-ray speed\n\
+                  against Embree\", and docs/results.md (`cpu-timing /tmp/large2/city.json`)."
+)]
+struct Args {
+    /// The scene: a glTF file, an OBJ file or a scene manifest .json (e.g. `hdov generate city`'s city.json).
+    #[arg(value_name = "SCENE")]
+    scene: PathBuf,
+    /// Also write every id cube (u32 little-endian, point after point) to this file, to compare two versions
+    /// texel by texel.
+    #[arg(value_name = "IDS_DUMP_FILE")]
+    dump_to: Option<PathBuf>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let path = args.next().ok_or("usage: cpu-timing SCENE [IDS_DUMP_FILE]")?;
-    let dump_to = args.next();
-    let (scene, _) = Scene::load(std::path::Path::new(&path))?;
+    let Args { scene: path, dump_to } = Args::parse();
+    let (scene, _) = Scene::load(&path)?;
     let t0 = std::time::Instant::now();
     let mut backend = CpuBackend::new(&scene, 128)?;
     let build = t0.elapsed();

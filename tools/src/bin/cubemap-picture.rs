@@ -5,15 +5,34 @@
 //!
 //! `cargo run --release -p hdov-tools --bin cubemap-picture -- [OUT.png] [R]`
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::{BACK_FACE_BIT, CpuBackend, DovBackend, IdCube, NO_OBJECT};
 use plotters::prelude::*;
 
+#[derive(Parser)]
+#[command(
+    name = "cubemap-picture",
+    about = "Draws the object-ID cube map that the DoV measurement renders at one street point of the default city",
+    long_about = "Draws the object-ID cube map that the DoV measurement renders at one street point of the default city\n\
+                  (seed 1; the grid corner near the middle that sees the most objects from the street), with the CPU\n\
+                  ray caster: the six 90° faces unfolded as a cross, each object in its own colour, surfaces seen from\n\
+                  behind darkened. Prints the point, the objects visible and the sky's share.\n\
+                  \n\
+                  Makes: the README's picture docs/cubemap.png (`cubemap-picture`, R = 192)."
+)]
+struct Args {
+    /// The PNG written (4R × 3R pixels).
+    #[arg(value_name = "OUT.png", default_value = "docs/cubemap.png")]
+    out: String,
+    /// Cube-map resolution R (texels per face edge).
+    #[arg(default_value_t = 192, value_parser = clap::value_parser!(u32).range(1..))]
+    r: u32,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let out = args.next().unwrap_or_else(|| "docs/cubemap.png".into());
-    let r: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(192);
+    let Args { out, r } = Args::parse();
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
     let grid = scene.grid.expect("the city brings a grid");
     // The grid corner near the city's middle that sees the most objects from the street (not from

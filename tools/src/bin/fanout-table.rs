@@ -8,6 +8,7 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
 use hdov::Overwrite;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::BackendKind;
@@ -17,24 +18,43 @@ use hdov::{BuildParams, Database, LodRule, Mode, QueryParams, VisibilityParams};
 const FANOUTS: [u32; 5] = [4, 8, 16, 32, 126];
 const ETAS: [f64; 5] = [0.0, 1e-4, 1e-3, 1e-2, 3e-2];
 
+#[derive(Parser)]
+#[command(
+    name = "fanout-table",
+    about = "The fan-out table: per fan-out M, the tree's nodes, height and layout bytes, and the default query's \
+             faces, pages and items per η beside naive's",
+    long_about = "The fan-out table (re-checked for issue 18): for M in {4, 8, 16, 32, 126}, the tree's nodes and\n\
+                  height, each storage layout's bytes, and per η in {0, 1e-4, 1e-3, 1e-2, 3e-2} the mean faces, pages\n\
+                  and items (draw calls) of the default query from every cell's centre (indexed-vertical, no camera),\n\
+                  beside the naive method's at the same LOD rule. Databases (CPU backend) are built once into --cache\n\
+                  and reused. Prints a Markdown table; --csv also writes the numbers with internal LODs per η.\n\
+                  \n\
+                  Makes: docs/query.md, \"Fan-out\" (both tables) and docs/results/fanout_default.csv,\n\
+                  docs/results/fanout_large.csv (`fanout-table --scale default --resolution 128 --cache\n\
+                  /work/experiments --csv docs/results/fanout_default.csv`; `--scale large` for the large city)."
+)]
+struct Args {
+    /// The generated city (seed 1): tiny, small, default, large or huge.
+    #[arg(long, default_value = "default", value_parser = hdov_tools::args::city_scale)]
+    scale: CityScale,
+    /// Cube-map resolution R of the databases built.
+    #[arg(long, value_name = "R", default_value_t = 64)]
+    resolution: u32,
+    /// The queries' LOD rule, as `hdov query --lod-rule` takes it (default: the query's default).
+    #[arg(long, value_name = "RULE", value_parser = hdov_tools::args::lod_rule)]
+    lod_rule: Option<LodRule>,
+    /// Where the databases are built and looked for, one per M: SCALE-rR-mM.hdov.
+    #[arg(long, value_name = "DIR", default_value = "target/experiments")]
+    cache: PathBuf,
+    /// Also write the table's numbers as CSV to this file.
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut scale = CityScale::Default;
-    let mut resolution = 64;
-    let mut cache = PathBuf::from("target/experiments");
-    let mut csv: Option<PathBuf> = None;
-    let mut lod_rule = LodRule::default();
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = || args.next().ok_or(format!("{a} needs a value"));
-        match a.as_str() {
-            "--scale" => scale = value()?.parse()?,
-            "--resolution" => resolution = value()?.parse()?,
-            "--cache" => cache = value()?.into(),
-            "--csv" => csv = Some(value()?.into()),
-            "--lod-rule" => lod_rule = value()?.parse()?,
-            _ => return Err(format!("unknown argument {a}").into()),
-        }
-    }
+    let args = Args::parse();
+    let (scale, resolution, cache, csv) = (args.scale, args.resolution, args.cache, args.csv);
+    let lod_rule = args.lod_rule.unwrap_or_default();
     let scene = hdov::city::generate(&CityParams { seed: 1, scale, ..Default::default() })?;
     let mut rows = vec![format!(
         "M,nodes,height,horizontal_bytes,vertical_bytes,indexed_vertical_bytes,naive_faces,naive_pages,naive_items,{}",

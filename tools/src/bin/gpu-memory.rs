@@ -9,20 +9,42 @@
 
 use std::time::Instant;
 
+use clap::Parser;
 use hdov::city::{CityParams, CityScale};
 use hdov::dov::gpu::{DEFAULT_LOD_TOLERANCE_TEXELS, GpuOptions};
 use hdov::dov::{DovBackend, GpuBackend, IdCube};
 use hdov::lod::{LodParams, leaf_chain};
 use hdov::scene::Scene;
 
+#[derive(Parser)]
+#[command(
+    name = "gpu-memory",
+    about = "GPU memory of the wgpu DoV backend: bytes uploaded by its instanced layout against the world-space one, \
+             and the cost per sample point of drawing instances",
+    long_about = "GPU memory of the wgpu DoV backend: the bytes its instanced layout uploads (base meshes and their leaf\n\
+                  LODs once in model space, 52 bytes per instance) against the world-space layout it replaced (every\n\
+                  instance's triangles, and every coarser level of them, as 16-byte vertices), at full detail and with\n\
+                  leaf LODs; then the time, draw commands and triangles per sample point at a few grid corners, with\n\
+                  indirect multi-draws and with direct draws; and this process's peak RSS. Needs a wgpu adapter.\n\
+                  \n\
+                  Makes: docs/dov.md, \"GPU memory\" (the bytes table and the speed figures)\n\
+                  (`gpu-memory 4 128 default /work/experiments/large/city.json`)."
+)]
+struct Args {
+    /// Grid corners measured per scene for the speed figures.
+    #[arg(default_value_t = 4)]
+    points: usize,
+    /// Cube-map resolution R (texels per face edge).
+    #[arg(default_value_t = 128)]
+    r: u32,
+    /// Scenes: scene files (glTF, OBJ or a scene manifest .json), or `default` for the generated default city
+    /// (seed 1).
+    #[arg(value_name = "SCENE", default_value = "default")]
+    scenes: Vec<String>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let points: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(4);
-    let r: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(128);
-    let mut scenes: Vec<String> = args.collect();
-    if scenes.is_empty() {
-        scenes.push("default".into());
-    }
+    let Args { points, r, scenes } = Args::parse();
     println!("{}", hdov_tools::machine());
     for name in scenes {
         let scene = if name == "default" {

@@ -13,6 +13,7 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
 use hdov::city::WalkKind;
 use hdov::render::{ColorMode, Renderer, View, fidelity};
 use hdov::review::ReviewParams;
@@ -23,12 +24,38 @@ use hdov_tools::experiments::{mean, sequence_psnr};
 /// One point of a curve: a walk's mean faces per step, pages read, PSNR.
 type Point = (f64, f64, f64);
 
+#[derive(Parser)]
+#[command(
+    name = "hierarchy-chart",
+    about = "PSNR against faces drawn and against pages read along the database's three recorded walks, per query \
+             method and parameter",
+    long_about = "The chart the HDoV-tree exists for (issue 18): PSNR against faces drawn and against pages read along\n\
+                  the database's three recorded walks, for the default query across η, naive, vmsse across τ,\n\
+                  polygon budgets, the thesis's levels (`--lod-rule dov`) across η, and REVIEW. Each method walks each\n\
+                  walk in a fresh session (VISUAL: a 256-page LRU cache; REVIEW: DPLRU, SF 2, 1 km eyesight); per walk\n\
+                  it reports the mean faces drawn per step, the pages read over the walk, and the PSNR of the walk's\n\
+                  mean squared error against full detail from every step's camera (640 × 360, 60°). Prints a CSV on\n\
+                  stdout and writes the chart. Needs a wgpu adapter (Mesa's CPU drivers will do).\n\
+                  \n\
+                  Makes: docs/results.md, item 10 \"The hierarchy's speed against fidelity along the walks\":\n\
+                  docs/results/hierarchy_walks.svg and (stdout) docs/results/hierarchy_walks.csv\n\
+                  (`hierarchy-chart DB docs/results/hierarchy_walks.svg 60` on the demo's database)."
+)]
+struct Args {
+    /// The database (a directory `hdov build` or `hdov demo` wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+    /// The chart written (SVG).
+    #[arg(value_name = "OUT.svg")]
+    out: PathBuf,
+    /// Steps per walk.
+    #[arg(default_value_t = 60, value_parser = clap::value_parser!(u64).range(1..))]
+    steps: u64,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let usage = "usage: hierarchy-chart DB OUT.svg [STEPS]";
-    let db_path = PathBuf::from(args.next().ok_or(usage)?);
-    let out = PathBuf::from(args.next().ok_or(usage)?);
-    let steps: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(60);
+    let Args { db: db_path, out, steps } = Args::parse();
+    let steps = steps as usize;
     let db = Database::open(&db_path)?;
     let grid = *db.grid().ok_or("the database holds no grid")?;
     let renderer = Renderer::new()?;

@@ -11,22 +11,42 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::render::{ColorMode, Renderer, View, fidelity};
 use hdov::{Database, ItemKind, LodRule, Mode, QueryParams};
 use hdov_tools::HIERARCHY_ETAS as ETAS;
 use hdov_tools::experiments::sequence_psnr;
 
+#[derive(Parser)]
+#[command(
+    name = "hierarchy-table",
+    about = "What the hierarchy buys at street level: pages, faces, items and PSNR of the default query (and others) \
+             against naive's, over 24 street views",
+    long_about = "What the hierarchy buys at street level (issue 18's protocol): the default query at each η (and the\n\
+                  thesis's levels, vmsse, a screen-error rule) against the naive answer at the same LOD rule and\n\
+                  cameras, over 24 views of the database's grid (12 viewpoints along the first avenue, each looking\n\
+                  along the walk and to its left). Prints one Markdown table: pages, faces and items (draw calls) as\n\
+                  shares of naive's, the internal LODs returned, and the PSNR of the mean squared error over the views\n\
+                  against full detail; then, over every cell, how often a query reads more pages than naive and whether\n\
+                  faces or pages ever grow from one η to the next. The PSNR column needs a wgpu adapter (Mesa's CPU\n\
+                  drivers will do); without one it is left empty.\n\
+                  \n\
+                  Makes: docs/query.md, \"The η rule\" (the table the default η was chosen from, and the large\n\
+                  city's), and the 24-street-view table of docs/query.md, \"Fan-out\" (`hierarchy-table DB` on the\n\
+                  demo's database; `hierarchy-table /work/experiments/default-r128-mM.hdov` per fan-out)."
+)]
+struct Args {
+    /// The database (a directory `hdov build` or `hdov demo` wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+    /// Size of each view in pixels.
+    #[arg(value_name = "WIDTHxHEIGHT", default_value = "640x360", value_parser = hdov_tools::args::size)]
+    size: [u32; 2],
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let db_path = PathBuf::from(args.next().ok_or("usage: hierarchy-table DB [WIDTHxHEIGHT]")?);
-    let (w, h) = match args.next() {
-        Some(s) => {
-            let (a, b) = s.split_once('x').ok_or("size: WIDTHxHEIGHT")?;
-            (a.parse()?, b.parse()?)
-        }
-        None => (640, 360),
-    };
+    let Args { db: db_path, size: [w, h] } = Args::parse();
     let db = Database::open(&db_path)?;
     let grid = *db.grid().ok_or("the database holds no grid")?;
     let views: Vec<View> = hdov::city::avenue_walk(&grid, 12)

@@ -5,13 +5,34 @@
 //!
 //! `cargo run --release -p hdov-tools --bin prefetch-walk -- DB`
 
+use std::path::PathBuf;
+
+use clap::Parser;
 use hdov::{Database, SessionParams};
 use hdov_storage::PolicyKind;
 use hdov_tools::experiments::caching::street_walks;
 
+#[derive(Parser)]
+#[command(
+    name = "prefetch-walk",
+    about = "Prefetch on a walkthrough: the continuous street walks with and without prefetching, DoV-Time cache of \
+             64 pages",
+    long_about = "Prefetch on a walkthrough: the continuous street walks of the caching experiment, walked with and\n\
+                  without prefetching (the cell three steps ahead queried after each step), DoV-Time cache of 64\n\
+                  pages. Prints a Markdown table: pages read on arrival, pages prefetched, cache hit rate, and the\n\
+                  99th percentile of a step's time. (The thesis's query figures are drawn by the experiments harness.)\n\
+                  \n\
+                  Makes: docs/query.md, \"Prefetch\" (`prefetch-walk /work/experiments/default-r64-m16.hdov`)."
+)]
+struct Args {
+    /// The database (a directory `hdov build` or the experiments harness wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let db_path = std::env::args().nth(1).ok_or("usage: prefetch-walk DB")?;
-    let db = Database::open(std::path::Path::new(&db_path))?;
+    let Args { db: db_path } = Args::parse();
+    let db = Database::open(&db_path)?;
     let grid = *db.grid().ok_or("the database holds no grid")?;
     let continuous = street_walks(&grid);
     // Prefetch: the continuous walks with and without it, DoV-Time cache of 64 pages.

@@ -10,8 +10,10 @@
 //! steps per row, default 2,000, after one untimed pass over the viewpoints; only the rows whose
 //! name contains FILTER, e.g. `walk/` or `threshold-1e-3`, for profiling one of them).
 
+use std::path::PathBuf;
 use std::time::Instant;
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::{Database, QueryParams, SessionParams};
 use hdov_storage::{LayoutKind, PolicyKind};
@@ -19,15 +21,37 @@ use hdov_storage::{LayoutKind, PolicyKind};
 use hdov_testkit::bench as common;
 use hdov_tools::experiments::quantile;
 
+#[derive(Parser)]
+#[command(
+    name = "query-latency",
+    about = "Query latency percentiles: p50/p99 of warm point queries per mode and layout, and of walkthrough steps",
+    long_about = "Query latency percentiles: p50/p99 (and mean, max) of warm point queries per mode and layout, and of\n\
+                  walkthrough steps without and with a cell flip (and of the flipping steps of a walk along the avenue:\n\
+                  point queries through a reader kept open), with pages, nodes and items per query and the slowest\n\
+                  viewpoint. Runs on the query benchmarks' fixture (the default city at R = 64, fan-out 16, cached\n\
+                  under <target>/bench-data, built on first use; the large city too with HDOV_BENCH_LARGE=1), or on\n\
+                  --db's database over its grid's avenue walk. Criterion (`cargo bench --bench query`) gives the\n\
+                  means; this gives the tails. Prints a Markdown table, with the machine.\n\
+                  \n\
+                  Makes: docs/query-speed.md, \"Results\" (the p50/p99 columns of the default and large city's\n\
+                  tables; `HDOV_BENCH_LARGE=1 query-latency 2000`), and the latency figures of docs/query.md, \"The η\n\
+                  rule\", and docs/sharding.md (`query-latency --db DB 2000`)."
+)]
+struct Args {
+    /// Measure this database instead of the fixtures, over its grid's avenue walk.
+    #[arg(long, value_name = "DB")]
+    db: Option<PathBuf>,
+    /// Timed queries or steps per row, after one untimed pass over the viewpoints.
+    #[arg(default_value_t = 2_000)]
+    n: usize,
+    /// Only the rows whose name contains FILTER, e.g. `walk/` or `point/threshold-1e-3` (for profiling one;
+    /// default: every row).
+    filter: Option<String>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1).peekable();
-    // `--db PATH`: measure that database instead of the fixtures (its grid's avenue walk).
-    let given = match args.next_if(|a| a == "--db") {
-        Some(_) => Some(std::path::PathBuf::from(args.next().ok_or("--db needs a database directory")?)),
-        None => None,
-    };
-    let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(2_000).max(1);
-    let filter = args.next().unwrap_or_default();
+    let Args { db: given, n, filter } = Args::parse();
+    let (n, filter) = (n.max(1), filter.unwrap_or_default());
     println!("{}\n", hdov_tools::machine());
     println!(
         "| city | benchmark | p50 µs | p99 µs | mean µs | max µs | pages/query | nodes/query | items | slowest viewpoint: median µs (pages) |"

@@ -19,31 +19,55 @@
 //! `RAY_SPEED_PACKETS_ONLY=1` only the packets' pass runs (quick comparisons while tuning).
 
 use std::io::Write;
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::dov::{CpuBackend, DovBackend, IdCube, cubemap};
 use hdov::grid::ViewGrid;
 use hdov::scene::Scene;
 use hdov_tools::process_cpu_time;
 
+#[derive(Parser)]
+#[command(
+    name = "ray-speed",
+    about = "Per-ray speed of the CPU backend on one thread (reference tracer, one ray at a time, packets), and the \
+             files Embree needs to cast the same rays",
+    long_about = "Per-ray speed of the CPU backend on one thread, and the files Embree needs to cast the very same rays\n\
+                  (tools/embree/embree_c_speed.c, embree_ray_speed.py; tools/embree/ray_speed.sh runs them all).\n\
+                  Sample points: the corners of an X × Y × Z cell grid over the region a build would use. At each\n\
+                  point: the reference tracer (one `trace` per texel), and `render_ids` one ray at a time and by\n\
+                  packets, each timed in its own pass in the process's CPU time; every id cube must equal the\n\
+                  reference's (up to ties at equal depth), else the run fails. Writes into OUT_DIR: triangles.f32,\n\
+                  objects.u32, points.f32, directions.f32, ids.u32 and hdov.json (resolution, near, timings). With\n\
+                  RAY_SPEED_PACKETS_ONLY=1 in the environment only the packets' pass runs (quick comparisons while\n\
+                  tuning).\n\
+                  \n\
+                  Makes: docs/dov.md, \"Per-ray speed against Embree\" (hdov's columns of its tables; the packets ÷\n\
+                  one ray table is in docs/journal/packet-tracer.md, §4: `ray-speed /tmp/engine.obj OUT 256 4,1,4`), and docs/results.md,\n\
+                  \"Per-ray speed against Embree\" (`tools/embree/ray_speed.sh SCENE OUT_DIR 256`)."
+)]
+struct Args {
+    /// The scene: a glTF file, an OBJ file or a scene manifest .json.
+    #[arg(value_name = "SCENE")]
+    scene: PathBuf,
+    /// Where the rays' files and hdov.json are written (created if missing).
+    #[arg(value_name = "OUT_DIR")]
+    out_dir: PathBuf,
+    /// Cube-map resolution R (texels per face edge): 6·R² rays per point.
+    #[arg(value_name = "RESOLUTION", default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
+    r: u32,
+    /// Cells of the sample-point grid along x, y and z (its corners are the points).
+    #[arg(value_name = "X,Y,Z", default_value = "8,1,8", value_parser = hdov_tools::args::triple)]
+    dims: [u32; 3],
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let usage = "usage: ray-speed SCENE OUT_DIR [RESOLUTION] [X,Y,Z]";
-    let mut args = std::env::args().skip(1);
-    let scene_path = args.next().ok_or(usage)?;
-    let out_dir = std::path::PathBuf::from(args.next().ok_or(usage)?);
-    let r: u32 = args.next().map(|s| s.parse()).transpose().map_err(|e| format!("resolution: {e}"))?.unwrap_or(256);
-    let dims: Vec<u32> = args
-        .next()
-        .unwrap_or_else(|| "8,1,8".into())
-        .split(',')
-        .map(str::parse)
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("grid: {e}"))?;
-    let dims: [u32; 3] = dims.try_into().map_err(|_| "grid: expected X,Y,Z")?;
+    let Args { scene: scene_path, out_dir, r, dims } = Args::parse();
     println!("{}", hdov_tools::machine());
 
-    let (scene, _) = Scene::load(std::path::Path::new(&scene_path))?;
+    let (scene, _) = Scene::load(&scene_path)?;
     let grid = ViewGrid::resolve(scene.bounds(), scene.grid, None, Some(dims), None)?;
     let points: Vec<Vec3> = (0..grid.corner_count()).map(|i| grid.corner_position(grid.corner_coords(i))).collect();
     let t0 = Instant::now();

@@ -3,7 +3,7 @@
 //! probing, the rate of visible (cell, object) pairs that no sample point sees (misses), the share
 //! of the truth's DoV they carry, the false floors, the distance of the cell DoV from the dense
 //! max, and the cost (points measured, rays, CPU time) against corners only. The numbers of
-//! docs/dov.md, "Adaptive sampling" and "Ray probing".
+//! docs/journal/dov-sampling.md, §1–3 (summarised in docs/dov.md, "Misses against a dense truth").
 //!
 //! `cargo run --release -p hdov-tools --bin sampler-audit -- SCENE [R] [SHARD I/N] [DENSE] [SAMPLERS]`
 //!
@@ -26,10 +26,11 @@
 
 use std::time::Instant;
 
-use hdov::dov::adaptive::AdaptiveSampling;
+use clap::Parser;
+use hdov::RayProbing;
 use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::probe::RayProbing;
 use hdov::dov::{CpuBackend, CubeMap, DovBackend};
+use hdov::{AdaptiveSampling, Sampling};
 use hdov_testkit::audit::{DENSE_HALTON_START, dense_cells};
 
 /// One row of the table: a way of sampling.
@@ -67,12 +68,12 @@ impl Sampler {
         match *self {
             Sampler::Corners { neighbours } if neighbours => o.zero_dov_tests.push(FloorTest::NeighbourCorners),
             Sampler::Corners { .. } => {}
-            Sampler::Interior(k) => o.interior_samples = k,
-            Sampler::Adaptive(a) => o.adaptive = Some(a),
+            Sampler::Interior(k) => o.samplers.push(Sampling::Interior(k)),
+            Sampler::Adaptive(a) => o.samplers.push(Sampling::Adaptive(a)),
             // No floor: every entry at the floor DoV is then one a probe ray verified (an object
             // thinner than a texel), not a guess, and counts as found.
             Sampler::Probe(p) => {
-                o.probe = Some(p);
+                o.samplers.push(Sampling::Probe(p));
                 o.zero_dov_tests.clear();
             }
         }
@@ -144,19 +145,55 @@ fn compare(truth: &[CellDov], got: &[(u32, CellDov)], cube: &CubeMap, guessed_fl
     c
 }
 
+#[derive(Parser)]
+#[command(
+    name = "sampler-audit",
+    about = "From-region samplers against dense interior sampling: misses, missed DoV, false floors, DoV deficit and \
+             cost per sampler",
+    long_about = "From-region samplers against dense interior sampling: per scene, for each sampler, the rate of visible\n\
+                  (cell, object) pairs that no sample point sees (misses, also among pairs of at least 4 centre\n\
+                  texels), the share of the truth's DoV they carry, the false floors, the distance of the cell DoV\n\
+                  from the dense max, and the cost (points measured, probe and footprint rays, CPU time) against\n\
+                  corners only. CPU backend. The truth (for SHARD's cells): per cell, the 8 corners and DENSE Halton\n\
+                  points from index 1001 on; the samplers run on the whole grid, as a build does. Prints a Markdown\n\
+                  table. With HDOV_AUDIT_MISSES=1 in the environment, also every missed pair and the misses by size.\n\
+                  \n\
+                  Makes: docs/journal/dov-sampling.md, §1–3 (the adaptive, probing and truth-against-itself tables;\n\
+                  tables), and docs/results.md, \"From-region sampling against dense sampling\"\n\
+                  (`sampler-audit audit 64 0/1 64 corners,neighbours,16,adaptive:2:16`; `fence`; `city 128 14/29 ...`)."
+)]
+struct Args {
+    /// The scene: `street` (issue 22's street), `audit` (tests/dov_audit.rs's street block), `fence` (a picket
+    /// fence of bars 0.25–8 texels wide in front of small objects) or `city` (the default generated city).
+    #[arg(value_name = "SCENE", default_value = "audit")]
+    scene: String,
+    /// Cube-map resolution R (texels per face edge).
+    #[arg(default_value_t = 64)]
+    r: u32,
+    /// The cells the truth is taken for (it costs DENSE cube maps per cell): shard I of N equal parts of the
+    /// grid's cells.
+    #[arg(value_name = "SHARD", default_value = "0/1", value_parser = hdov_tools::args::shard)]
+    shard: Shard,
+    /// Halton points per cell of the dense truth, besides its 8 corners.
+    #[arg(default_value_t = 64)]
+    dense: u32,
+    /// Samplers, comma-separated: `corners`, `neighbours` (corners + the neighbour floor), K (K interior points),
+    /// `adaptive[:SEEDS:BUDGET]` or `probe[:POINTS:RAYS]` (without floor tests). `NAME@shard` runs on SHARD's
+    /// cells only (and the corners their candidates need), for rows too costly on the whole grid, e.g.
+    /// `64@shard`.
+    #[arg(value_name = "SAMPLERS", value_delimiter = ',', default_value = "corners,neighbours,4,16,adaptive")]
+    samplers: Vec<String>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let scene_name = args.first().map_or("audit", String::as_str);
-    let r: u32 = args.get(1).map(|s| s.parse()).transpose()?.unwrap_or(64);
-    let shard: Shard = args.get(2).map_or(Ok(Shard::ALL), |s| s.parse())?;
-    let dense: u32 = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(64);
+    let args = Args::parse();
+    let (scene_name, r, shard, dense) = (args.scene.as_str(), args.r, args.shard, args.dense);
     // Each sampler, and whether it runs on SHARD's cells only.
     let samplers: Vec<(Sampler, bool)> = args
-        .get(4)
-        .map_or("corners,neighbours,4,16,adaptive", String::as_str)
-        .split(',')
+        .samplers
+        .iter()
         .map(|s| {
-            let (name, on_shard) = s.strip_suffix("@shard").map_or((s, false), |name| (name, true));
+            let (name, on_shard) = s.strip_suffix("@shard").map_or((s.as_str(), false), |name| (name, true));
             Sampler::parse(name).map(|x| (x, on_shard))
         })
         .collect::<Result<_, _>>()?;

@@ -22,6 +22,7 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::{Database, QueryParams};
 use hdov_testkit::scenes::Rng;
@@ -105,20 +106,51 @@ impl AnswerItem<'_> {
     }
 }
 
+#[derive(Parser)]
+#[command(
+    name = "serve-load",
+    about = "Loads `hdov serve` with concurrent clients over loopback: throughput, latency per route, server RSS and \
+             errors",
+    long_about = "Loads `hdov serve` with concurrent clients over loopback and reports throughput, p50/p99/max latency\n\
+                  per route (query, mesh), the server's idle and peak RSS, and errors. It starts `hdov serve DB --addr\n\
+                  127.0.0.1:0` itself. Each client holds one keep-alive connection and repeats: a point query at a\n\
+                  seeded random viewpoint of the grid, then a fetch of one mesh the answer names. Unless --no-check,\n\
+                  every answer is checked against `Database::query` and every mesh against `hdov::lod_glb` (in the\n\
+                  client, outside the timed part of each request). Exits with status 1 if any request failed.\n\
+                  \n\
+                  Makes: docs/serve.md, \"Under load\", and docs/data/serve-load.csv (`serve-load\n\
+                  /tmp/demo-serve/city.hdov --clients 32 --requests 20000 --out docs/data/serve-load.csv`)."
+)]
+struct Args {
+    /// The database to serve (a directory `hdov build` or `hdov demo` wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+    /// Concurrent clients, each on one keep-alive connection.
+    #[arg(long, value_name = "N", default_value_t = 32)]
+    clients: usize,
+    /// Requests in all, queries and mesh fetches both counted.
+    #[arg(long, value_name = "N", default_value_t = 20_000)]
+    requests: usize,
+    /// Also write every request's latency as CSV (route,latency_ms) to this file.
+    #[arg(long, value_name = "OUT.csv")]
+    out: Option<String>,
+    /// Leave out the checks against the library, to time the server alone (the checks share the cores with it).
+    #[arg(long)]
+    no_check: bool,
+    /// The `hdov` program to start (default: the `hdov` beside this program, e.g. target/release/hdov).
+    #[arg(long, value_name = "PATH")]
+    hdov: Option<PathBuf>,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let Some(db_dir) = args.first().filter(|a| !a.starts_with("--")).map(PathBuf::from) else {
-        eprintln!("usage: serve-load DB [--clients N] [--requests N] [--out OUT.csv] [--no-check] [--hdov PATH]");
-        std::process::exit(2);
-    };
-    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1));
-    let clients: usize = flag("--clients").map_or(32, |s| s.parse().expect("--clients N"));
-    let requests: usize = flag("--requests").map_or(20_000, |s| s.parse().expect("--requests N"));
-    let out = flag("--out");
-    let check = !args.iter().any(|a| a == "--no-check");
+    let args = Args::parse();
+    let db_dir = args.db;
+    let (clients, requests) = (args.clients, args.requests);
+    let out = args.out.as_ref();
+    let check = !args.no_check;
     let db = Database::open(&db_dir).expect("opens");
     let grid = *db.grid().expect("a grid");
-    let hdov = flag("--hdov").map_or_else(|| std::env::current_exe().unwrap().with_file_name("hdov"), PathBuf::from);
+    let hdov = args.hdov.unwrap_or_else(|| std::env::current_exe().unwrap().with_file_name("hdov"));
     let mut server = Command::new(&hdov)
         .args(["serve", db_dir.to_str().unwrap(), "--addr", "127.0.0.1:0"])
         .stdout(Stdio::piped())

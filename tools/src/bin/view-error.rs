@@ -32,6 +32,7 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
+use clap::Parser;
 use glam::Vec3;
 use hdov::dov::sampling::is_inside;
 use hdov::dov::{DovBackend, IdCube};
@@ -69,17 +70,74 @@ struct Row {
 /// A viewpoint's wrong share, its index, and the lacking objects behind it (name, share).
 type Worst = (f64, usize, Vec<(String, f64)>);
 
+#[derive(Parser)]
+#[command(
+    name = "view-error",
+    about = "From-region error as users see it: the share of the view that a cell's answer lacks, at random \
+             viewpoints inside its cells, per sampler",
+    long_about = "From-region error as users see it (issue 22): builds the scene's database with each sampler (CPU\n\
+                  backend at --resolution, the command's default floors), then, at --viewpoints random viewpoints\n\
+                  strictly inside each cell (seeded; redrawn where the truth finds them inside geometry), measures\n\
+                  the wrong share: the solid angle of texels whose object the cell's naive answer lacks, over that of\n\
+                  all texels that show an object. The truth is a full id cube map of the whole scene at --truth by the\n\
+                  other tracer (the GPU backend where an adapter exists, else the CPU backend, flagged as the same\n\
+                  tracer). With --frames, also the per-frame error of a 1024 × 1024 frame at 45° in a random\n\
+                  direction. Also reports the share of (viewpoint, object) pairs whose point DoV exceeds the cell's\n\
+                  stored DoV by more than 2 texels + 1 %. Prints a table per sampler (visibility seconds, mean, p99,\n\
+                  max, viewpoints wrong) and the worst viewpoints; --out writes a CSV row per (sampler, viewpoint),\n\
+                  --chart a chart of mean error against visibility time.\n\
+                  \n\
+                  Makes: docs/dov.md, \"Wrong pixels at random viewpoints\" (the full tables: docs/journal/dov-sampling.md, §4), and\n\
+                  docs/results.md, \"Wrong pixels at random viewpoints\": docs/data/view_error_SCENE.csv and the\n\
+                  charts docs/results/view_error_SCENE.svg (`view-error street --samplers corners,16,adaptive,probe,...\n\
+                  --viewpoints 8 --frames --out docs/data/view_error_street.csv --chart\n\
+                  docs/results/view_error_street.svg`; and audit, fence, city)."
+)]
+struct Args {
+    /// The scene: `street` (issue 22's street: 1 m gaps, yards, poles, a slatted fence; 18 cells), `audit` (the
+    /// street block of tests/dov_audit.rs), `fence` (the picket fence of `sampler-audit`) or `city` (the default
+    /// city; --cells N takes N of its cells).
+    #[arg(value_name = "SCENE", default_value = "street")]
+    scene: String,
+    /// Samplers to build with, comma-separated, in `hdov build --samples` syntax (e.g. corners, 16, adaptive,
+    /// probe, probe:32:4:24576, region).
+    #[arg(long, value_name = "S,S,..", value_delimiter = ',', default_value = "corners,probe")]
+    samplers: Vec<String>,
+    /// Random viewpoints per cell.
+    #[arg(long, value_name = "N", default_value_t = 8)]
+    viewpoints: usize,
+    /// Seed of the viewpoints, the cell subset and the frames' directions.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Cube-map resolution R of the builds.
+    #[arg(long, value_name = "R", default_value_t = 128)]
+    resolution: u32,
+    /// Cube-map resolution of the truth.
+    #[arg(long, value_name = "R", default_value_t = 256)]
+    truth: u32,
+    /// Only N of the scene's cells, drawn with the seed (default: all).
+    #[arg(long, value_name = "N")]
+    cells: Option<usize>,
+    /// Also GVS++'s per-frame error: one 1024 × 1024 frame at 45° per viewpoint, drawn by hdov's renderer.
+    #[arg(long)]
+    frames: bool,
+    /// Write a CSV row per (sampler, viewpoint) to this file.
+    #[arg(long, value_name = "OUT.csv")]
+    out: Option<PathBuf>,
+    /// Write the chart of mean wrong share against visibility time (SVG) to this file.
+    #[arg(long, value_name = "OUT.svg")]
+    chart: Option<PathBuf>,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).cloned();
-    let scene_name = args.first().filter(|a| !a.starts_with("--")).cloned().unwrap_or_else(|| "street".into());
-    let samplers: Vec<String> =
-        flag("--samplers").unwrap_or_else(|| "corners,probe".into()).split(',').map(str::to_string).collect();
-    let per_cell: usize = flag("--viewpoints").map_or(Ok(8), |s| s.parse())?;
-    let seed: u64 = flag("--seed").map_or(Ok(1), |s| s.parse())?;
-    let r: u32 = flag("--resolution").map_or(Ok(128), |s| s.parse())?;
-    let truth_r: u32 = flag("--truth").map_or(Ok(256), |s| s.parse())?;
-    let frames = args.iter().any(|a| a == "--frames");
+    let args = Args::parse();
+    let scene_name = args.scene;
+    let samplers: Vec<String> = args.samplers;
+    let per_cell: usize = args.viewpoints;
+    let seed: u64 = args.seed;
+    let r: u32 = args.resolution;
+    let truth_r: u32 = args.truth;
+    let frames = args.frames;
     let (mut scene, grid) = hdov_testkit::scenes::audit_scene(&scene_name, r)?;
     scene.grid = Some(grid);
     println!("{}", hdov_tools::machine());
@@ -87,7 +145,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Cells: all, or a seeded subset.
     let mut rng = Rng(seed);
     let mut cells: Vec<usize> = (0..grid.cell_count()).collect();
-    if let Some(n) = flag("--cells").map(|s| s.parse::<usize>()).transpose()? {
+    if let Some(n) = args.cells {
         for i in (1..cells.len()).rev() {
             cells.swap(i, ((rng.next_f32() * (i + 1) as f32) as usize).min(i));
         }
@@ -244,7 +302,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
 
-    if let Some(out) = flag("--out").map(PathBuf::from) {
+    if let Some(out) = args.out {
         let mut csv = String::from("scene,sampler,visibility_seconds,cell,x,y,z,wrong_share,frame_error\n");
         for row in &rows {
             for (i, v) in views.iter().enumerate() {
@@ -258,7 +316,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::fs::write(&out, csv)?;
         println!("wrote {}", out.display());
     }
-    if let Some(chart) = flag("--chart").map(PathBuf::from) {
+    if let Some(chart) = args.chart {
         let mut panel = Panel::new(
             format!("{scene_name}: {} viewpoints", views.len()),
             "visibility time / the first sampler's",

@@ -16,6 +16,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use clap::Parser;
+use clap::builder::PossibleValuesParser;
 use glam::Vec3;
 use hdov::city::WalkKind;
 use hdov::query::LodRule;
@@ -33,33 +35,56 @@ struct Options {
     pictures: Option<PathBuf>,
 }
 
+#[derive(Parser)]
+#[command(
+    name = "walk-compare",
+    about = "Recorded walks, several methods: VISUAL (the HDoV-tree), REVIEW and frustum culling compared step by step \
+             (time, pages, faces, memory, fidelity)",
+    long_about = "Recorded walks, several methods (thesis §5.8.5, table 5.3, fig. 5.26): the database's avenue walks\n\
+                  (straight, turning, back-and-forth) walked by VISUAL (the HDoV-tree) at several η and LOD rules, by\n\
+                  REVIEW at two disk-cell sizes, and by frustum culling alone. Per method: mean and variance of a\n\
+                  step's time, pages read, faces drawn, resident bytes, the time to draw the frame, and, with a\n\
+                  graphics adapter, PSNR and coverage difference of what is drawn against full detail from the step's\n\
+                  camera. Each method walks once untimed (the OS file cache warm, its session cold), then once timed\n\
+                  in a fresh session; images are drawn after each timed step, outside its time. Prints a Markdown\n\
+                  table per walk, with the machine.\n\
+                  \n\
+                  Makes: docs/review.md, \"Walkthrough comparison\" (the tables of sessions 1–3 and \"Frame cost\n\
+                  beside the thesis's table 5.3\") and, with --pictures, the pictures of \"REVIEW's lost far objects\n\
+                  (thesis fig. 5.26)\": docs/review-vs-visual-WALK.png (`walk-compare /work/cmp/default.hdov --steps 60\n\
+                  --walk straight --pictures docs`)."
+)]
+struct Args {
+    /// The database (a directory `hdov build` wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+    /// Image size WxH in pixels (the cameras are 45° across).
+    #[arg(long, value_name = "WxH", default_value = "320x200", value_parser = hdov_tools::args::size)]
+    size: [u32; 2],
+    /// Steps per walk.
+    #[arg(long, value_name = "N", default_value_t = 60)]
+    steps: usize,
+    /// The walk: straight, turning, back-and-forth, or all three.
+    #[arg(
+        long,
+        value_name = "KIND|all",
+        default_value = "all",
+        value_parser = PossibleValuesParser::new(WalkKind::ALL.map(WalkKind::name).into_iter().chain(["all"]))
+    )]
+    walk: String,
+    /// Per walk, write the frame where REVIEW at 200 m loses most against full detail, as full | VISUAL η = 1e-3 |
+    /// REVIEW side by side, into DIR/review-vs-visual-WALK.png (needs a graphics adapter).
+    #[arg(long, value_name = "DIR")]
+    pictures: Option<PathBuf>,
+}
+
 fn options() -> Result<Options, String> {
-    let usage = "usage: walk-compare DB [--size WxH] [--steps N] [--walk KIND|all] [--pictures DIR]";
-    let mut args = std::env::args().skip(1);
-    let mut o = Options {
-        db: args.next().ok_or(usage)?.into(),
-        size: [320, 200],
-        steps: 60,
-        walks: WalkKind::ALL.to_vec(),
-        pictures: None,
+    let args = Args::parse();
+    let walks = match args.walk.as_str() {
+        "all" => WalkKind::ALL.to_vec(),
+        kind => vec![hdov_tools::args::walk_kind(kind)?],
     };
-    while let Some(flag) = args.next() {
-        let value = args.next().ok_or_else(|| format!("{flag} needs a value; {usage}"))?;
-        match flag.as_str() {
-            "--size" => {
-                let v: Vec<u32> =
-                    value.split('x').map(str::parse).collect::<Result<_, _>>().map_err(|e| format!("--size: {e}"))?;
-                let [w, h] = v[..] else { return Err("--size is WxH".into()) };
-                o.size = [w, h];
-            }
-            "--steps" => o.steps = value.parse().map_err(|e| format!("--steps: {e}"))?,
-            "--walk" if value == "all" => o.walks = WalkKind::ALL.to_vec(),
-            "--walk" => o.walks = vec![value.parse()?],
-            "--pictures" => o.pictures = Some(value.into()),
-            _ => return Err(format!("unknown flag {flag}; {usage}")),
-        }
-    }
-    Ok(o)
+    Ok(Options { db: args.db, size: args.size, steps: args.steps, walks, pictures: args.pictures })
 }
 
 struct Row {

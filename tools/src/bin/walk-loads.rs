@@ -7,21 +7,35 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
 use hdov::city::WalkKind;
 use hdov::{Database, Mode, QueryParams, SessionParams};
 use hdov_tools::walk_loads::walk;
 
+#[derive(Parser)]
+#[command(
+    name = "walk-loads",
+    about = "Where a walk's geometry bytes go: each recorded walk by the naive and the default query, the bytes loaded \
+             split into first loads, refinements and the floor",
+    long_about = "Where a walk's geometry bytes go (issue 18's walk target): each recorded walk (straight, turning,\n\
+                  back-and-forth) walked by the naive query and by the default query in fresh sessions, the bytes\n\
+                  each loaded split into first loads and refinements of objects and of internal nodes, and the floor\n\
+                  (what no loader could avoid), each against naive's loads. Prints one Markdown table.\n\
+                  \n\
+                  Makes: docs/query.md, \"The η rule\", the table of geometry loaded along the recorded walks\n\
+                  (`walk-loads DB` on the demo's database)."
+)]
+struct Args {
+    /// The database (a directory `hdov build` or `hdov demo` wrote), with a viewing grid.
+    #[arg(value_name = "DB")]
+    db: PathBuf,
+    /// Steps per walk (150, as `hdov walk`).
+    #[arg(long, value_name = "N", default_value_t = 150)]
+    steps: usize,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let usage = "usage: walk-loads DB [--steps N]";
-    let mut args = std::env::args().skip(1);
-    let db_path = PathBuf::from(args.next().ok_or(usage)?);
-    let mut steps = 150;
-    while let Some(flag) = args.next() {
-        match (flag.as_str(), args.next()) {
-            ("--steps", Some(v)) => steps = v.parse()?,
-            _ => return Err(format!("unknown or incomplete flag {flag}; {usage}").into()),
-        }
-    }
+    let Args { db: db_path, steps } = Args::parse();
     let db = Database::open(&db_path)?;
     db.grid().ok_or("the database holds no grid to walk")?;
     let default = QueryParams::default();

@@ -38,19 +38,14 @@ pub enum Scale {
     Large,
 }
 
-impl std::str::FromStr for Scale {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Scale, String> {
-        match s {
-            "small" => Ok(Scale::Small),
-            "default" => Ok(Scale::Default),
-            "large" => Ok(Scale::Large),
-            _ => Err(format!("--scale: unknown scale '{s}' (small, default, large)")),
-        }
-    }
-}
+hdov_storage::named!(Scale, "scale");
+hdov_storage::by_names!(Scale);
 
 impl Scale {
+    /// Every scale.
+    pub const ALL: [Scale; 3] = [Scale::Small, Scale::Default, Scale::Large];
+
+    /// The name `--scale` takes.
     pub fn name(self) -> &'static str {
         match self {
             Scale::Small => "small",

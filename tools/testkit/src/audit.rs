@@ -8,7 +8,7 @@ use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 use hdov::Result;
-use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, TreeShape, cell_dov, neighbourhood_corners};
+use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, TreeShape, cell_dov};
 use hdov::dov::sampling::{halton_point, interior_points, is_inside};
 use hdov::dov::{DovBackend, PointDov};
 use hdov::geom::Aabb;
@@ -160,7 +160,7 @@ pub fn audit_zero_dov(
     for id in cells {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
-        let hood = neighbourhood_corners(grid, coords, 1);
+        let hood = grid.neighbourhood_corners(coords, 1);
         for &c in &hood {
             if let Entry::Vacant(slot) = corner_seen.entry(c) {
                 slot.insert(seen_from(grid.corner_position(grid.corner_coords(c)))?);

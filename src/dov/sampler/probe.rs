@@ -19,102 +19,26 @@
 //! proves it hidden earlier), so the hidden candidates set the price.
 //!
 //! An object seen only through a gap narrower than the spacing of its targets, or only from
-//! places between the probe points, can still be missed: the audit in docs/dov.md measures how
+//! places between the probe points, can still be missed: the audit in docs/journal/dov-sampling.md (§2) measures how
 //! often against dense sampling. *Region rays* (`RayProbing::region`) close most of that: rays
 //! from all over the cell in every direction ([`region_finds`]); what they meet is seen, and what
 //! the neighbouring cells' region rays meet becomes a candidate here (`precompute`).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::ops::Range;
 
-use glam::{Affine3A, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
-use super::cubemap::{FACE_COUNT, face_basis, uv_direction};
-use super::sampling::{RegionRays, RegionSequence, halton_point, halton3};
-use super::{BACK_FACE_BIT, CubeMap, NO_OBJECT, PointDov};
-pub use crate::format::params::RayProbing;
+use super::{CellSampler, CellSite, Tally};
+use crate::dov::cubemap::{FACE_COUNT, face_basis, uv_direction};
+use crate::dov::rays::RayCaster;
+use crate::dov::sampling::{RegionRays, RegionSequence, halton_point, seen_by};
+use crate::dov::{BACK_FACE_BIT, CubeMap, DovBackend, NO_OBJECT, PointDov};
+use crate::error::{Error, Param, Result};
+use crate::format::sampling::RayProbing;
 use crate::geom::Aabb;
-use crate::scene::Scene;
-
-/// Single rays through a scene, with the id rule of [`super::DovBackend::render_ids`]. The CPU
-/// backend is one ([`super::DovBackend::ray_caster`]).
-pub trait RayCaster: Sync {
-    /// The id seen from `origin` along `dir` (any length) among the surfaces within `reach`
-    /// lengths of `dir` (infinity: all): object id, with [`BACK_FACE_BIT`] when its surface is
-    /// seen from behind, or [`NO_OBJECT`].
-    fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32;
-
-    /// [`RayCaster::first_hit`] of each ray (origin, direction) within `reach`, in turn. A
-    /// caster may carry what one ray met to the next, so rays in a coherent order (nearby
-    /// directions one after another) can be faster; the ids are the same.
-    fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
-        rays.iter().map(|&(o, d)| self.first_hit(o, d, reach)).collect()
-    }
-
-    /// Points on every object's surface to aim at.
-    fn targets(&self) -> &SurfaceTargets;
-}
-
-/// Points spread over each object's surface, by area: [`SurfaceTargets::PER_MESH`] per base mesh
-/// in model space (instances share them), carried to the world by the object's transform.
-pub struct SurfaceTargets {
-    /// Model-space points of each base mesh.
-    mesh_points: Vec<Vec<Vec3>>,
-    /// Base mesh and model → world transform of each object.
-    objects: Vec<(u32, Affine3A)>,
-    /// Centre of each object's box: the target of an object without area.
-    centres: Vec<Vec3>,
-}
-
-impl SurfaceTargets {
-    /// Points per base mesh: enough that 64 probe points × 4 rays aim at 256 different places.
-    pub const PER_MESH: usize = 256;
-
-    /// Costs one pass over the scene's stored triangles.
-    pub fn new(scene: &Scene) -> Self {
-        let mesh_points = scene.meshes.iter().map(|m| spread_over(&m.mesh.triangles().collect::<Vec<_>>())).collect();
-        let objects = scene.objects.iter().map(|o| (o.mesh, Affine3A::from_mat4(o.transform))).collect();
-        let centres = scene.all_object_bounds().iter().map(Aabb::center).collect();
-        Self { mesh_points, objects, centres }
-    }
-
-    /// The `k`-th target of `object` (cycling through its points).
-    pub fn target(&self, object: u32, k: usize) -> Vec3 {
-        let (mesh, to_world) = &self.objects[object as usize];
-        let points = &self.mesh_points[*mesh as usize];
-        if points.is_empty() {
-            return self.centres[object as usize];
-        }
-        to_world.transform_point3(points[k % points.len()])
-    }
-}
-
-/// [`SurfaceTargets::PER_MESH`] points over `triangles`, each triangle getting its share of the
-/// area: stratified along the cumulative area, Halton-spread inside each triangle.
-fn spread_over(triangles: &[[Vec3; 3]]) -> Vec<Vec3> {
-    let mut cumulative = Vec::with_capacity(triangles.len());
-    let mut total = 0.0f64;
-    for t in triangles {
-        total += 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length() as f64;
-        cumulative.push(total);
-    }
-    if !(total > 0.0 && total.is_finite()) {
-        return Vec::new();
-    }
-    let n = SurfaceTargets::PER_MESH;
-    (0..n)
-        .map(|k| {
-            let x = (k as f64 + 0.5) / n as f64 * total;
-            let t = &triangles[cumulative.partition_point(|&c| c < x).min(triangles.len() - 1)];
-            let h = halton3(k as u32 + 1);
-            let (mut a, mut b) = (h.x, h.y);
-            if a + b > 1.0 {
-                (a, b) = (1.0 - a, 1.0 - b);
-            }
-            t[0] + a * (t[1] - t[0]) + b * (t[2] - t[0])
-        })
-        .collect()
-}
+use crate::grid::ViewGrid;
 
 /// How far past its target a probe ray looks, in lengths of the ray to the target: the target lies
 /// on the object's surface, so a ray that meets the object meets it by then (the margin is for
@@ -176,7 +100,7 @@ fn inside_test_directions() -> impl Iterator<Item = Vec3> {
 }
 
 /// Whether `p` sees mostly back faces (inside a closed mesh): such points are left out, as
-/// [`super::sampling::is_inside`] leaves out measured ones.
+/// [`crate::dov::sampling::is_inside`] leaves out measured ones.
 fn is_inside(rays: &dyn RayCaster, p: Vec3) -> bool {
     let (mut back, mut hits) = (0, 0);
     for d in inside_test_directions() {
@@ -438,7 +362,7 @@ fn pick(b: &Aabb, i: usize, axis: usize) -> f32 {
 /// points where its edges cross the plane (just in front of it, where they project far out).
 fn face_rect(
     corners: &[Vec3],
-    basis: super::cubemap::FaceBasis,
+    basis: crate::dov::cubemap::FaceBasis,
     r: u32,
 ) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
     const IN_FRONT: f32 = 1e-6;
@@ -487,10 +411,119 @@ fn box_exit(p: Vec3, d: Vec3, b: &Aabb) -> Option<f32> {
     (near <= far).then_some(far)
 }
 
+/// How many rings of neighbouring cells' region finds are a cell's probe candidates.
+pub const REGION_RING: u32 = 8;
+
+/// How many rings of neighbouring cells' corners give ray probing its candidates: on the audit
+/// scene two rings left 33 % fewer pairs unfound than one, three rings 16 % fewer again at 30 %
+/// more rays (docs/journal/dov-sampling.md, §2).
+pub const PROBE_CANDIDATE_RING: u32 = 2;
+
+/// Ray probing, with the region rays of a shard's cells and their neighbours: what a cell's
+/// rays meet it sees, and its neighbours probe for (an object seen from part of a cell is the
+/// likeliest to be seen from part of the next, where that cell's own rays may have missed it).
+pub struct Probe {
+    probing: RayProbing,
+    /// What each cell's region rays met ([`region_finds`]), by cell id.
+    region: HashMap<usize, Vec<(u32, Vec3)>>,
+}
+
+impl Probe {
+    pub fn new(probing: RayProbing) -> Self {
+        Probe { probing, region: HashMap::new() }
+    }
+
+    /// The objects that the region rays of the cells within [`REGION_RING`] of `cell` (itself
+    /// left out) met, which no point of `cell` saw and which are not candidates already: nearest
+    /// cells first, as many as probing them would cost the cell's own region rays at most.
+    fn region_candidates(&self, cell: &CellSite, seen: &HashSet<u32>, candidates: &HashSet<u32>) -> HashSet<u32> {
+        let p = self.probing;
+        let cap = (p.region / (p.points * p.rays).max(1)) as usize;
+        let mut ring_of: Vec<(u32, u32)> = cell
+            .grid
+            .neighbourhood_cells(cell.coords, REGION_RING)
+            .into_iter()
+            .filter(|&n| n != cell.id)
+            .flat_map(|n| {
+                let c = cell.grid.cell_coords(n);
+                let ring = (0..3).map(|a| c[a].abs_diff(cell.coords[a])).max().unwrap_or(0);
+                self.region.get(&n).into_iter().flatten().map(move |f| (ring, f.0))
+            })
+            .filter(|&(_, o)| !seen.contains(&o) && !candidates.contains(&o))
+            .collect();
+        ring_of.sort_unstable();
+        let mut taken = HashSet::new();
+        for (_, o) in ring_of {
+            if taken.len() == cap {
+                break;
+            }
+            taken.insert(o);
+        }
+        taken
+    }
+}
+
+impl CellSampler for Probe {
+    fn corner_ring(&self) -> u32 {
+        PROBE_CANDIDATE_RING
+    }
+
+    fn casts_rays(&self) -> bool {
+        true
+    }
+
+    fn prepare(&mut self, backend: &mut dyn DovBackend, grid: &ViewGrid, cells: Range<usize>, tally: &mut Tally) -> Result<()> {
+        let Some(caster) = backend.ray_caster() else {
+            return Err(Error::bad_param(
+                Param::Samples,
+                format!("{} casts single rays: the {} backend has none (use the cpu backend)", self.probing, backend.name()),
+            ));
+        };
+        if self.probing.region == 0 {
+            return Ok(());
+        }
+        let mut ids: Vec<usize> = cells.flat_map(|id| grid.neighbourhood_cells(grid.cell_coords(id), REGION_RING)).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        let sequence = RegionSequence::new(self.probing.region);
+        for id in ids {
+            self.region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), &sequence));
+            tally.probe_rays += u64::from(self.probing.region);
+        }
+        Ok(())
+    }
+
+    fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
+        let caster = backend.ray_caster().expect("prepare refuses a backend without a ray caster");
+        let seen = seen_by(cell.corners.iter().copied().chain(points.iter()));
+        let mut candidates = seen_by(cell.nearby.iter().copied());
+        candidates.extend((0..cell.object_bounds.len() as u32).filter(|&o| cell.object_bounds[o as usize].intersects(&cell.bounds)));
+        if self.probing.region > 0 {
+            let nearby = self.region_candidates(cell, &seen, &candidates);
+            candidates.extend(nearby);
+        }
+        // probe_cell skips the seen ones.
+        let mut candidates: Vec<u32> = candidates.into_iter().collect();
+        candidates.sort_unstable();
+        let own = self.region.get(&cell.id).map_or(&[][..], Vec::as_slice);
+        let leads = Leads { seen: &seen, candidates: &candidates, region: own };
+        let probe = probe_cell(caster, cell.cube, &cell.bounds, &leads, cell.object_bounds, &self.probing);
+        tally.probe_rays += probe.rays;
+        tally.footprint_rays += probe.footprint_rays;
+        points.extend(probe.points);
+        Ok(())
+    }
+
+    fn found_from(&self, cell: usize) -> Option<Vec<u32>> {
+        self.region.get(&cell).map(|finds| finds.iter().map(|f| f.0).collect())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dov::{CpuBackend, DovBackend};
+    use crate::dov::CpuBackend;
+    use crate::scene::Scene;
 
     /// A few boxes around the origin, some straddling cube faces.
     fn boxes() -> Scene {

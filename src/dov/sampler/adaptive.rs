@@ -17,16 +17,17 @@
 //!   of it; while one is unseen, the cell keeps exploring with Halton points.
 //!
 //! It works through [`DovBackend::measure`] only, so both backends use it. The cell's DoV stays
-//! the max over all measured points ([`super::precompute::cell_dov`]).
+//! the max over all measured points ([`crate::dov::precompute::cell_dov`]).
 
 use std::collections::HashSet;
 
 use glam::Vec3;
 
-use super::sampling::{halton3, is_inside, seen_by};
-use super::{DovBackend, PointDov};
+use super::{CellSampler, CellSite, Tally};
+use crate::dov::sampling::{halton3, is_inside, seen_by};
+use crate::dov::{DovBackend, PointDov};
 use crate::error::Result;
-pub use crate::format::params::AdaptiveSampling;
+use crate::format::sampling::AdaptiveSampling;
 use crate::geom::Aabb;
 
 /// The axes along which a cell's view changes most: those at least half as long as its longest
@@ -39,7 +40,7 @@ fn long_axes(extent: Vec3) -> Vec<usize> {
 /// Measures the adaptive interior points of the cell `cell` (see the module documentation).
 /// `known` are the points measured for the cell already (its corners): what they see is not new;
 /// `candidates` keep the cell sampling while one of them is unseen (see the module
-/// documentation). Points inside geometry ([`super::precompute::PrecomputeOptions::skip_inside_points`]) reveal
+/// documentation). Points inside geometry ([`crate::dov::precompute::PrecomputeOptions::skip_inside_points`]) reveal
 /// nothing. `measured` is called after each measurement. Returns the measurements, at most
 /// `budget`, in the order taken.
 pub fn sample_cell(
@@ -103,6 +104,34 @@ pub fn sample_cell(
         round = next;
     }
     Ok(out)
+}
+
+/// The adaptive sampler: [`sample_cell`], its candidates the objects the neighbouring cells'
+/// corners see.
+pub struct Adaptive(pub AdaptiveSampling);
+
+impl CellSampler for Adaptive {
+    fn corner_ring(&self) -> u32 {
+        1
+    }
+
+    /// Its seeds: how many more it takes is known only when it stops.
+    fn planned_points(&self) -> u32 {
+        self.0.seeds
+    }
+
+    fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
+        let known: Vec<&PointDov> = cell.corners.iter().copied().chain(points.iter()).collect();
+        let candidates = seen_by(cell.nearby.iter().copied());
+        let planned = self.0.seeds as usize;
+        let mut taken = 0;
+        let extra = sample_cell(backend, &cell.bounds, &known, &candidates, &self.0, &mut || {
+            taken += 1;
+            tally.measured(taken > planned);
+        })?;
+        points.extend(extra);
+        Ok(())
+    }
 }
 
 #[cfg(test)]
