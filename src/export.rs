@@ -60,6 +60,7 @@ pub fn scene_items(db: &Database, lod: u32) -> Result<Vec<Item>> {
                 kind: ItemKind::Object,
                 id: o,
                 name: catalog.objects[o as usize].name.clone(),
+                part: catalog.objects[o as usize].part,
                 lod: l as u32,
                 faces: chain[l].faces,
                 dov: 0.0,
@@ -132,15 +133,19 @@ fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
                 meshes.len() - 1
             }
         };
-        let kind = match i.kind {
-            ItemKind::Object => "object",
-            ItemKind::Node => "node",
-        };
-        let mut extras = json!({ "kind": kind, "id": i.id, "name": &*i.name, "lod": i.lod, "error": i.lod_ref.error });
+        let mut extras = json!({ "kind": i.kind, "id": i.id, "name": &*i.name, "lod": i.lod, "error": i.lod_ref.error });
         if let Some(d) = p.dov {
             extras["dov"] = json!(d);
         }
-        let mut node = json!({ "name": &*i.name, "mesh": mesh, "extras": extras });
+        // A part says so in its node's name too, for viewers that show names only.
+        let node_name = match i.part {
+            Some(k) => {
+                extras["part"] = json!(k);
+                format!("{} [part {k}]", i.name)
+            }
+            None => i.name.to_string(),
+        };
+        let mut node = json!({ "name": node_name, "mesh": mesh, "extras": extras });
         let transform = db.item_transform(i);
         if transform != Mat4::IDENTITY {
             node["matrix"] = json!(transform.to_cols_array());

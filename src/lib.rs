@@ -65,7 +65,7 @@ pub mod city;
 pub mod render;
 pub mod review;
 
-pub use build::{BuildReport, build, build_shard_on, merge::merge};
+pub use build::{BuildReport, build, build_shard_on, merge::merge, objects_of};
 pub use camera::Camera;
 pub use db::Database;
 pub use db::info::Info;
@@ -76,7 +76,7 @@ pub use format::Manifest;
 pub use format::catalog::LodRef;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,
-    LodParams, RayProbing, Sampling, Shard, VisibilityParams,
+    LodParams, ObjectParts, RayProbing, Sampling, Shard, VisibilityParams,
 };
 pub use geom::Aabb;
 pub use grid::ViewGrid;

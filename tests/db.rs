@@ -87,6 +87,7 @@ fn empty_meshes_are_refused() {
             name: "ghost".into(),
             mesh: scene.meshes.len() as u32 - 1,
             transform: Mat4::IDENTITY,
+            part: None,
         });
         let err =
             hdov::build(&scene, &out, &BuildParams::default(), Overwrite::Never, &Progress::hidden()).unwrap_err();
@@ -154,7 +155,7 @@ fn damaged_files_are_refused_with_a_clear_error() {
             Box::new(|b| {
                 *b = String::from_utf8(b.clone())
                     .unwrap()
-                    .replace("\"format_version\": 3", "\"format_version\": 9")
+                    .replace("\"format_version\": 4", "\"format_version\": 9")
                     .into_bytes()
             }),
             "version 9",
@@ -165,7 +166,7 @@ fn damaged_files_are_refused_with_a_clear_error() {
             Box::new(|b| {
                 *b = String::from_utf8(b.clone())
                     .unwrap()
-                    .replace("\"format_version\": 3", "\"format_version\": 2")
+                    .replace("\"format_version\": 4", "\"format_version\": 3")
                     .into_bytes()
             }),
             "rebuild it",

@@ -70,7 +70,7 @@ fn baked(scene: &Scene) -> Scene {
             indices.chunks_exact_mut(3).for_each(|t| t.swap(1, 2));
         }
         out.meshes.push(BaseMesh { name: o.name.clone(), mesh: Mesh { positions, indices } });
-        out.objects.push(Object { name: o.name.clone(), mesh: i as u32, transform: Mat4::IDENTITY });
+        out.objects.push(Object { name: o.name.clone(), mesh: i as u32, transform: Mat4::IDENTITY, part: None });
     }
     out.check().unwrap();
     out

@@ -169,6 +169,46 @@ fn bad_gltf_files_are_refused_in_one_line() {
     }
 }
 
+/// Issue 32's attacks: a buffer URI that leaves the scene's folder (by `..`, by a link, to a
+/// device) is refused in one line naming the scene, before a byte of it is read; a buffer file
+/// longer than its declared `byteLength` is refused too; one beside the scene loads.
+#[test]
+fn buffers_outside_the_scene_folder_are_refused_unread() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("scene");
+    std::fs::create_dir(&folder).unwrap();
+    let bin = buffer();
+    std::fs::write(folder.join("a.bin"), &bin).unwrap();
+    std::fs::write(dir.path().join("secret.bin"), &bin).unwrap();
+    let with_uri = |uri: &str| {
+        let path = write_gltf(&folder, "s.gltf", &document(bin.len(), Some(uri.to_string())));
+        Scene::load(&path)
+    };
+    with_uri("a.bin").unwrap();
+    for (uri, expect) in [
+        ("../secret.bin", "outside the scene's folder"),
+        ("../../../../../../../../etc/passwd", "outside the scene's folder"),
+        ("/etc/passwd", "not a file beside"),
+    ] {
+        let err = with_uri(uri).expect_err(uri).to_string();
+        assert!(err.contains(expect) && err.contains("s.gltf") && !err.contains('\n'), "{uri}: {err}");
+    }
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", folder.join("zero.bin")).unwrap();
+        std::os::unix::fs::symlink(dir.path().join("secret.bin"), folder.join("link.bin")).unwrap();
+        for uri in ["zero.bin", "link.bin"] {
+            let err = with_uri(uri).expect_err(uri).to_string();
+            assert!(err.contains("outside the scene's folder"), "{uri}: {err}");
+        }
+    }
+    let mut longer = bin.clone();
+    longer.extend([0u8; 64]);
+    std::fs::write(folder.join("long.bin"), &longer).unwrap();
+    let err = with_uri("long.bin").unwrap_err().to_string();
+    assert!(err.contains(&format!("the scene declares {}", bin.len())), "{err}");
+}
+
 /// assimp's glTF 2.0 test models: the broken ones are refused in one line, the sound ones load,
 /// and none panics (`assimp-testmodels`, which CI installs).
 #[test]

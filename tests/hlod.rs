@@ -170,12 +170,14 @@ fn a_far_cluster_of_barely_visible_objects_comes_back_as_nodes() {
     for i in 0..16 {
         let at = Vec3::new((i % 4) as f32 * 3.0 - 4.5, 1.2 + (i / 4) as f32 * 3.0, 70.0);
         let transform = Mat4::from_translation(at) * Mat4::from_scale(Vec3::splat(1.2));
-        scene.objects.push(Object { name: format!("ball {i}"), mesh: ball, transform });
+        scene.objects.push(Object { name: format!("ball {i}"), mesh: ball, transform, part: None });
     }
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-2.0, 1.5, 0.0), Vec3::new(2.0, 2.0, 4.0)), [1, 1, 1]));
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let params = BuildParams {
+        // The walls and sill whole, as the leaves below were laid out for.
+        objects: hdov::ObjectParts::File,
         fanout: Some(4),
         visibility: Some(VisibilityParams {
             resolution: 128,

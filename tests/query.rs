@@ -26,6 +26,8 @@ fn city(dir: &Path) -> Database {
 
 fn build(scene: &Scene, dir: &Path, fanout: u32) -> Database {
     let params = BuildParams {
+        // Object ids below are the file's: no object is cut into parts.
+        objects: hdov::ObjectParts::File,
         fanout: Some(fanout),
         visibility: Some(VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()

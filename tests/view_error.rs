@@ -31,6 +31,7 @@ fn nothing_can_hide_so_nothing_is_wrong() {
     let visibility = hdov::VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() };
     let params = BuildParams { visibility: Some(visibility), ..Default::default() };
     hdov::build(&scene, &dir.path().join("db"), &params, Overwrite::Never, &Progress::hidden()).unwrap();
+    let scene = hdov::objects_of(&scene, &params);
     let db = Database::open(&dir.path().join("db")).unwrap();
     let mut truth = CpuBackend::new(&scene, 64).unwrap();
     let cube = truth.cube_map().clone();
@@ -126,7 +127,8 @@ fn region_rays_never_do_worse_than_corners_and_find_what_gaps_show() {
         let answer = |db: &Database, at: Vec3| -> HashSet<u32> {
             db.query(at, &naive).unwrap().items.iter().map(|i| i.id).collect()
         };
-        let mut truth = CpuBackend::new(&scene, 128).unwrap();
+        // The databases' objects (the street's ground is cut into parts), for their ids.
+        let mut truth = CpuBackend::new(&hdov::objects_of(&scene, &BuildParams::default()), 128).unwrap();
         let cube = truth.cube_map().clone();
         let mut ids = IdCube::new(128);
         let mut rng = Rng(22);

@@ -21,7 +21,7 @@ use crate::dov::precompute::{PrecomputeOptions, TreeShape, precompute_shard};
 use crate::dov::{WithRays, open_backend};
 use crate::error::{Error, Param, Result};
 use crate::format::catalog::{Catalog, LodRef, NodeShape, ObjectRecord};
-pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, VisibilityParams, limits};
+pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, ObjectParts, VisibilityParams, limits};
 use crate::format::tree_page::{self, NodePage};
 use crate::format::{
     CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileChecksum, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
@@ -78,6 +78,7 @@ pub fn build(
     progress: &Progress,
 ) -> Result<BuildReport> {
     check_inputs(scene, params)?;
+    let scene = &*objects_of(scene, params);
     let fanout = params.max_entries();
     // Claim the target first: a refusal must come before minutes of work, not after.
     let txn = begin_write(out, overwrite)?;
@@ -115,6 +116,7 @@ pub fn build(
                 name: o.name.as_str().into(),
                 mesh: o.mesh,
                 transform: o.transform.to_cols_array(),
+                part: o.part,
             })
             .collect(),
         mesh_names: scene.meshes.iter().map(|m| m.name.clone()).collect(),
@@ -184,6 +186,20 @@ fn check_inputs(scene: &Scene, params: &BuildParams) -> Result<()> {
     params.check(scene.grid.as_ref())
 }
 
+/// The scene a database built from `scene` with `params` holds, object for object (its object
+/// ids are the database's): the file's objects, or with [`ObjectParts::Geometry`] and a grid,
+/// those far larger than a cell cut into parts of two cells
+/// ([`crate::scene::parts::split_large_objects`]). What to measure a database against.
+pub fn objects_of<'a>(scene: &'a Scene, params: &BuildParams) -> std::borrow::Cow<'a, Scene> {
+    match (params.objects, &scene.grid) {
+        (ObjectParts::Geometry, Some(grid)) => {
+            let extent = crate::scene::parts::part_extent_for_cells(grid.cell_size().max_element());
+            std::borrow::Cow::Owned(crate::scene::parts::split_large_objects(scene, extent).0)
+        }
+        _ => std::borrow::Cow::Borrowed(scene),
+    }
+}
+
 /// Writes `tree.pages`: one node per page, in node-id order.
 fn write_tree(dir: &Path, tree: &RTree, page_size: u32) -> Result<()> {
     let mut pages = PageFileWriter::create(&dir.join(TREE_FILE), TREE_KIND, page_size)?;
@@ -214,6 +230,7 @@ pub fn build_shard_on(
     progress: &Progress,
 ) -> Result<BuildReport> {
     check_inputs(scene, params)?;
+    let scene = &*objects_of(scene, params);
     let (Some(v), Some(grid)) = (params.visibility.as_ref().filter(|v| v.shard.is_some()), &scene.grid) else {
         return Err(Error::bad_param(Param::Base, "a base is for shard builds: give --shard I/N"));
     };

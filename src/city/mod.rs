@@ -177,7 +177,7 @@ pub fn generate(params: &CityParams) -> Result<Scene, Error> {
         let turn = if site.turned { std::f32::consts::PI } else { 0.0 };
         let transform =
             Mat4::from_translation(Vec3::new(site.centre.x, 0.0, site.centre.y)) * Mat4::from_rotation_y(turn);
-        objects.push(Object { name: name.clone(), mesh: meshes.len() as u32, transform });
+        objects.push(Object { name: name.clone(), mesh: meshes.len() as u32, transform, part: None });
         meshes.push(BaseMesh { name, mesh });
     }
     for (index, site) in plan.details.iter().enumerate() {
@@ -186,7 +186,7 @@ pub fn generate(params: &CityParams) -> Result<Scene, Error> {
             Quat::from_rotation_y(site.yaw),
             Vec3::new(site.position.x, 0.0, site.position.y),
         );
-        objects.push(Object { name: format!("detail_{index:04}"), mesh: 0, transform });
+        objects.push(Object { name: format!("detail_{index:04}"), mesh: 0, transform, part: None });
     }
     let grid = Some(view_grid(plan.extent, params.scale));
     Ok(Scene { meshes, objects, grid })

@@ -9,8 +9,8 @@ use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
 use hdov::{
     Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info, InternalLods, LayoutKind,
-    LodParams, Manifest, Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm, ViewGrid,
-    VisibilityParams,
+    LodParams, Manifest, ObjectParts, Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm,
+    ViewGrid, VisibilityParams,
 };
 
 #[derive(Args)]
@@ -78,6 +78,11 @@ pub struct BuildArgs {
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
     #[arg(long, default_value = "str")]
     tree: TreeAlgorithm,
+    /// Objects: file (the file's objects as they are) or geometry (each one far larger than a
+    /// cell cut into parts of about two cells: what exporters group by material or storey spans
+    /// the scene; smaller answers, but the samplers miss more of the parts, docs/decisions.md 105).
+    #[arg(long, default_value = "file")]
+    objects: ObjectParts,
     /// Internal (tree node) LODs: hlod (levels by geometric error) or thesis (§5.6, from the
     /// children's coarsest levels, to reproduce the thesis's figures).
     #[arg(long, default_value = "hlod")]
@@ -258,6 +263,7 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
 
 pub fn build(a: BuildArgs) -> Result<()> {
     let params = BuildParams {
+        objects: a.objects,
         page_size: a.page_size,
         fanout: a.fanout,
         tree: a.tree,

@@ -31,6 +31,8 @@ pub struct ObjectRecord {
     pub mesh: u32,
     /// Column-major 4×4.
     pub transform: [f32; 16],
+    /// Which part of the file's object `name` this is, where the build cut it.
+    pub part: Option<u32>,
 }
 
 /// What the query engine needs to know of a node before reading its page: the inputs of the

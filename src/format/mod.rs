@@ -22,8 +22,9 @@ pub mod tree_page;
 pub use manifest::{Counts, FileChecksum, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
 
 /// 2: the catalog holds node shapes (the stop rule's inputs). 3: internal LODs by geometric
-/// error, and the catalog's error ladder and descent faces.
-pub const FORMAT_VERSION: u32 = 3;
+/// error, and the catalog's error ladder and descent faces. 4: objects may be parts of the
+/// file's objects (the catalog's `part`).
+pub const FORMAT_VERSION: u32 = 4;
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const TREE_FILE: &str = "tree.pages";
 pub const GEOMETRY_FILE: &str = "geometry.blob";

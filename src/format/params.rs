@@ -233,9 +233,45 @@ hdov_storage::by_names!(InternalLods);
 /// (docs/dov.md, "LOD-aware drawing").
 pub const DEFAULT_LOD_TOLERANCE_TEXELS: f32 = 0.05;
 
+/// Where a database's objects come from (`--objects`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObjectParts {
+    /// The file's objects as they are (one per OBJ group or glTF node instance).
+    File,
+    /// The file's objects, each one far larger than a cell cut into parts of about two cells
+    /// (`scene::parts`): what an exporter groups by material or storey spans the scene. Not yet
+    /// the default (decision 105).
+    Geometry,
+}
+
+impl ObjectParts {
+    /// Both sources.
+    pub const ALL: [ObjectParts; 2] = [ObjectParts::Geometry, ObjectParts::File];
+
+    /// The name `--objects` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            ObjectParts::File => "file",
+            ObjectParts::Geometry => "geometry",
+        }
+    }
+
+    /// Manifests without the field were built before objects were cut.
+    fn unrecorded() -> Self {
+        ObjectParts::File
+    }
+}
+
+hdov_storage::named!(ObjectParts, "object source");
+hdov_storage::by_names!(ObjectParts);
+serde_by_name!(ObjectParts);
+
 /// How a database was built.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BuildParams {
+    /// Where the objects come from.
+    #[serde(default = "ObjectParts::unrecorded")]
+    pub objects: ObjectParts,
     /// Bytes per page of the tree file and of the V-page layouts.
     pub page_size: u32,
     /// Most entries per tree node (M); `None`: [`DEFAULT_FANOUT`], or what a page holds if
@@ -254,6 +290,9 @@ pub struct BuildParams {
 impl Default for BuildParams {
     fn default() -> Self {
         Self {
+            // Not yet `Geometry` by default: the samplers miss more of the finer objects
+            // (decision 105).
+            objects: ObjectParts::File,
             page_size: 4096,
             fanout: None,
             tree: TreeAlgorithm::Str,

@@ -419,6 +419,7 @@ mod tests {
                         glam::Quat::from_rotation_y(i as f32),
                         glam::Vec3::new((i % 8) as f32 * 6.0, 0.0, (i / 8) as f32 * 6.0),
                     ),
+                    part: None,
                 })
                 .collect(),
             grid: None,

@@ -200,8 +200,12 @@ pub struct Item {
     pub kind: ItemKind,
     /// Object index or node id.
     pub id: u32,
-    /// The object's name, or `node N`.
+    /// The object's name (of the scene file's object), or `node N`.
     pub name: std::sync::Arc<str>,
+    /// Which part of the file's object `name` this is, where the build cut it
+    /// (`--objects geometry`); absent for a whole object and a node.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<u32>,
     /// LOD level, 0 = finest.
     pub lod: u32,
     /// Faces at the chosen level.

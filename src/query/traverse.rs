@@ -115,13 +115,13 @@ impl Traversal<'_, '_> {
     fn push_object(&mut self, o: u32, lod: usize, d: f64, mbr: Aabb) {
         let cat = self.levels.db.catalog();
         let lod_ref = cat.object_lods(o)[lod];
-        let name = cat.objects[o as usize].name.clone();
-        self.items.push(item(ItemKind::Object, o, name, lod, lod_ref, d, mbr));
+        let record = &cat.objects[o as usize];
+        self.items.push(item(ItemKind::Object, o, (record.name.clone(), record.part), lod, lod_ref, d, mbr));
     }
 
     fn push_node(&mut self, n: u32, lod: usize, d: f64, mbr: Aabb) {
         let lod_ref = self.levels.db.catalog().node_lods[n as usize][lod];
-        self.items.push(item(ItemKind::Node, n, format!("node {n}").into(), lod, lod_ref, d, mbr));
+        self.items.push(item(ItemKind::Node, n, (format!("node {n}").into(), None), lod, lod_ref, d, mbr));
     }
 
     /// Budget mode from the root: refine within `params.budget` faces; if even that does not
@@ -196,6 +196,7 @@ fn fit(chain: &[LodRef], budget: u64, preferred: usize) -> (usize, bool) {
     }
 }
 
-fn item(kind: ItemKind, id: u32, name: std::sync::Arc<str>, lod: usize, lod_ref: LodRef, d: f64, mbr: Aabb) -> Item {
-    Item { kind, id, name, lod: lod as u32, faces: lod_ref.faces, dov: d as f32, mbr, lod_ref }
+/// An answer item; `name` is its name and part.
+fn item(kind: ItemKind, id: u32, name: (std::sync::Arc<str>, Option<u32>), lod: usize, lod_ref: LodRef, d: f64, mbr: Aabb) -> Item {
+    Item { kind, id, name: name.0, part: name.1, lod: lod as u32, faces: lod_ref.faces, dov: d as f32, mbr, lod_ref }
 }

@@ -207,6 +207,7 @@ fn object_item(db: &Database, o: u32, mbr: Aabb) -> Item {
         kind: ItemKind::Object,
         id: o,
         name: cat.objects[o as usize].name.clone(),
+        part: cat.objects[o as usize].part,
         lod: 0,
         faces: lod_ref.faces,
         dov: 0.0,

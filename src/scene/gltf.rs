@@ -32,7 +32,7 @@ fn understood(ext: &str) -> bool {
 /// Reads a glTF file (see the module documentation); the warnings name what was skipped.
 pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     let bad = |reason: String| Error::bad_file(path, reason);
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::files::read_whole(path)?;
     let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| bad(format!("not a glTF file: {e}")))?;
     let doc = &gltf.document;
     for ext in doc.extensions_required() {
@@ -131,7 +131,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
                         let uses = name_uses.entry(base.clone()).or_insert(0);
                         *uses += 1;
                         let name = if *uses == 1 { base.clone() } else { format!("{base}#{uses}") };
-                        scene.objects.push(Object { name, mesh: m, transform: world * transform });
+                        scene.objects.push(Object { name, mesh: m, transform: world * transform, part: None });
                     }
                 }
             }
@@ -180,11 +180,10 @@ fn load_buffers(doc: &gltf::Document, blob: Option<&[u8]>, path: &Path) -> Resul
                     .map_err(|e| bad(format!("buffer {}: bad base64: {e}", buffer.index())))?
             }
             gltf::buffer::Source::Uri(uri) => {
-                if uri.contains("://") || Path::new(uri).is_absolute() {
-                    return Err(bad(format!("buffer {}: '{uri}' is not a file beside the scene", buffer.index())));
-                }
-                let file = path.parent().unwrap_or(Path::new(".")).join(uri);
-                std::fs::read(&file).map_err(|e| Error::io(&file, e))?
+                // Inside the scene's folder, and no more than its declared length (up to 3 bytes
+                // of 4-byte alignment padding may follow it, as in a GLB's binary chunk).
+                let file = super::files::beside(path, uri)?;
+                super::files::read_declared(&file, buffer.length() as u64, 3)?
             }
         };
         if data.len() < buffer.length() {

@@ -132,7 +132,7 @@ pub fn write(scene: &Scene, path: &Path, overwrite: Overwrite) -> Result<()> {
 
 /// Reads a manifest and its geometry. Every inconsistency is an error naming the file.
 pub fn read(path: &Path) -> Result<Scene> {
-    let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = super::files::read_whole(path)?;
     let m: ManifestFile =
         serde_json::from_slice(&text).map_err(|e| Error::bad_file(path, format!("not a scene manifest: {e}")))?;
     if m.format != FORMAT {
@@ -141,7 +141,7 @@ pub fn read(path: &Path) -> Result<Scene> {
     if m.version != VERSION {
         return Err(Error::bad_file(path, format!("scene manifest version {} (this hdov reads {VERSION})", m.version)));
     }
-    let meshes_path: PathBuf = path.parent().unwrap_or(Path::new(".")).join(&m.meshes_file);
+    let meshes_path: PathBuf = super::files::beside(path, &m.meshes_file)?;
     let meshes = read_meshes(&meshes_path)?;
     if meshes.len() != m.meshes.len() {
         return Err(Error::bad_file(
@@ -159,7 +159,7 @@ pub fn read(path: &Path) -> Result<Scene> {
     scene.objects = m
         .objects
         .into_iter()
-        .map(|o| Object { name: o.name, mesh: o.mesh, transform: Mat4::from_cols_array(&o.transform) })
+        .map(|o| Object { name: o.name, mesh: o.mesh, transform: Mat4::from_cols_array(&o.transform), part: None })
         .collect();
     Ok(scene)
 }
@@ -186,8 +186,8 @@ mod tests {
         Scene {
             meshes: vec![BaseMesh { name: "tri".into(), mesh }],
             objects: vec![
-                Object { name: "a".into(), mesh: 0, transform: Mat4::IDENTITY },
-                Object { name: "b".into(), mesh: 0, transform: Mat4::from_translation(Vec3::X * 5.0) },
+                Object { name: "a".into(), mesh: 0, transform: Mat4::IDENTITY, part: None },
+                Object { name: "b".into(), mesh: 0, transform: Mat4::from_translation(Vec3::X * 5.0), part: None },
             ],
             grid: Some(ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::splat(6.0)), [2, 1, 2])),
         }
@@ -240,5 +240,21 @@ mod tests {
         assert!(read(&p).unwrap_err().to_string().contains("magic"));
         std::fs::write(&p, b"{\"format\":\"other\"").unwrap();
         assert!(read(&p).unwrap_err().to_string().contains("s.json"));
+    }
+
+    #[test]
+    fn a_meshes_file_outside_the_scene_folder_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("scene");
+        std::fs::create_dir(&inner).unwrap();
+        let p = inner.join("s.json");
+        write(&scene(), &p, Overwrite::Never).unwrap();
+        std::fs::copy(p.with_extension("meshes"), dir.path().join("s.meshes")).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        for name in ["../s.meshes", "/etc/hostname"] {
+            std::fs::write(&p, text.replace("\"s.meshes\"", &format!("{name:?}"))).unwrap();
+            let err = read(&p).unwrap_err().to_string();
+            assert!(err.contains("s.json") && err.contains(name) && !err.contains('\n'), "{name}: {err}");
+        }
     }
 }

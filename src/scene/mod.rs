@@ -3,9 +3,11 @@
 //! An object is the unit the R-tree indexes and the DoV is measured for. Its geometry is its base
 //! mesh under its transform; many objects may share one base mesh (instances are stored once).
 
+pub mod files;
 pub mod gltf;
 pub mod manifest;
 pub mod obj;
+pub mod parts;
 
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
@@ -129,13 +131,18 @@ pub struct BaseMesh {
     pub mesh: Mesh,
 }
 
-/// One instance: a base mesh under a transform, with a unique name.
+/// One instance: a base mesh under a transform, with a unique name (and part).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Object {
+    /// The name of the object in the scene's file.
     pub name: String,
     /// Index into [`Scene::meshes`].
     pub mesh: u32,
     pub transform: Mat4,
+    /// Which part of the file's object this is, where hdov cut it ([`parts`]); `None`: the
+    /// file's object whole.
+    #[serde(default)]
+    pub part: Option<u32>,
 }
 
 /// A static world: base meshes, their instances and, optionally, the viewing-cell grid it brings.
@@ -223,7 +230,7 @@ impl Scene {
 
     /// Adds an object instancing base mesh `mesh` under `transform`; returns its index.
     pub fn add_object(&mut self, name: &str, mesh: u32, transform: Mat4) -> u32 {
-        self.objects.push(Object { name: name.into(), mesh, transform });
+        self.objects.push(Object { name: name.into(), mesh, transform, part: None });
         self.objects.len() as u32 - 1
     }
 
@@ -255,8 +262,11 @@ impl Scene {
             if !o.transform.is_finite() {
                 return Err(format!("object '{}' has a non-finite transform", o.name));
             }
-            if !names.insert(o.name.as_str()) {
-                return Err(format!("object name '{}' is not unique", o.name));
+            if !names.insert((o.name.as_str(), o.part)) {
+                return Err(match o.part {
+                    None => format!("object name '{}' is not unique", o.name),
+                    Some(k) => format!("object '{}' has part {k} twice", o.name),
+                });
             }
         }
         if let Some(g) = &self.grid {

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 
 /// Reads an OBJ file. Groups without faces are skipped, each with a warning in the second value.
 pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::files::read_whole(path)?;
     // Exporters write group names in legacy 8-bit encodings; tobj needs UTF-8 lines.
     let text = String::from_utf8_lossy(&bytes);
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
@@ -41,7 +41,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         let uses = name_uses.entry(group.clone()).or_insert(0);
         *uses += 1;
         let name = if *uses == 1 { group } else { format!("{group}#{uses}") };
-        scene.objects.push(Object { name: name.clone(), mesh: scene.meshes.len() as u32, transform: Mat4::IDENTITY });
+        scene.objects.push(Object { name: name.clone(), mesh: scene.meshes.len() as u32, transform: Mat4::IDENTITY, part: None });
         scene.meshes.push(BaseMesh { name, mesh });
     }
     if scene.objects.is_empty() {

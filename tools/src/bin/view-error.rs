@@ -140,6 +140,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let frames = args.frames;
     let (mut scene, grid) = hdov_testkit::scenes::audit_scene(&scene_name, r)?;
     scene.grid = Some(grid);
+    // The objects the databases hold (large ones cut into parts, `--objects geometry`), whose ids
+    // their answers name: the truth is measured on them.
+    let measured = hdov::objects_of(&scene, &BuildParams::default()).into_owned();
     println!("{}", hdov_tools::machine());
 
     // Cells: all, or a seeded subset.
@@ -155,11 +158,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // The truth, by the tracer the builds do not use.
     let (mut truth, same): (Box<dyn DovBackend>, bool) =
-        match hdov::open_backend(&scene, truth_r, BackendKind::Gpu, &Default::default()) {
+        match hdov::open_backend(&measured, truth_r, BackendKind::Gpu, &Default::default()) {
             Ok(b) => (b, false),
             Err(e) => {
                 println!("truth: no GPU backend ({e}); the CPU backend, the builds' own tracer");
-                (hdov::open_backend(&scene, truth_r, BackendKind::Cpu, &Default::default())?, true)
+                (hdov::open_backend(&measured, truth_r, BackendKind::Cpu, &Default::default())?, true)
             }
         };
     println!("truth: {} at R = {truth_r}{}", truth.name(), if same { " (same tracer as the builds)" } else { "" });
@@ -193,7 +196,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!(
         "{scene_name}: {} objects, {} of {} cells, {} viewpoints",
-        scene.objects.len(),
+        measured.objects.len(),
         cells.len(),
         grid.cell_count(),
         views.len()
@@ -249,7 +252,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (e, n) = dov_excess(&v.point, |o| stored.get(&o).copied().unwrap_or(0.0), texel, 2.0, 0.01);
             row.excess = (row.excess.0 + e, row.excess.1 + n);
             let mut named: Vec<(String, f64)> =
-                wrong.iter().map(|&(o, w)| (scene.objects[o as usize].name.clone(), w / v.seen)).collect();
+                wrong.iter().map(|&(o, w)| (measured.objects[o as usize].name.clone(), w / v.seen)).collect();
             named.sort_by(|a, b| b.1.total_cmp(&a.1));
             named.truncate(3);
             row.worst.push((share, i, named));

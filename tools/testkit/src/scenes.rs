@@ -101,7 +101,7 @@ impl SceneBuilder {
 
     pub fn object(&mut self, mesh: u32, transform: Mat4) -> u32 {
         let id = self.scene.objects.len();
-        self.scene.objects.push(Object { name: format!("o{id}"), mesh, transform });
+        self.scene.objects.push(Object { name: format!("o{id}"), mesh, transform, part: None });
         id as u32
     }
 
@@ -225,11 +225,12 @@ pub fn town(n: usize, ball_subdivisions: u32) -> Scene {
                 name: name.clone(),
                 mesh: scene.meshes.len() as u32,
                 transform: Mat4::IDENTITY,
+                part: None,
             });
             scene.meshes.push(BaseMesh { name, mesh: unit_cube().transformed(&place) });
             if (i + j) % 2 == 0 {
                 let transform = Mat4::from_translation(Vec3::new(x + 16.0, 1.0, z + 16.0));
-                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform });
+                scene.objects.push(Object { name: format!("ball_{i}_{j}"), mesh: 0, transform, part: None });
             }
         }
     }

@@ -1,0 +1,228 @@
+//! Objects from the geometry: a file's objects are what its exporter grouped (one per material
+//! in a game level, one slab per storey in a BIM model, one mesh per scan tile), and such an
+//! object spans the scene, so that every cell sees some of it and every answer holds all of it.
+//! [`split_large_objects`] cuts each object far larger than a cell into spatially coherent parts
+//! of bounded extent, and keeps the file's objects where they are already small.
+//!
+//! Parts are made per base mesh, in model space, so an instanced mesh is cut once and its
+//! instances stay instances (of its parts). Every part keeps its source object's name and says
+//! which part it is ([`Object::part`]).
+
+use glam::Vec3;
+
+use super::{BaseMesh, Mesh, Object, Scene};
+use crate::geom::{Aabb, max_scale};
+
+/// The longest extent a part may have, for cells of edge `cell_edge` (their longest edge): two
+/// cells, so that a cell sees parts of about its own neighbourhood. An object is cut only where
+/// it is more than twice that ([`split_large_objects`]).
+pub fn part_extent_for_cells(cell_edge: f32) -> f32 {
+    2.0 * cell_edge
+}
+
+/// What splitting did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SplitReport {
+    /// Base meshes cut into parts.
+    pub meshes_split: usize,
+    /// Objects cut into parts.
+    pub objects_split: usize,
+    /// Objects after the split.
+    pub objects: usize,
+}
+
+/// `scene` with every object whose world extent is more than twice `part_extent` replaced by
+/// parts no longer than `part_extent` (where a single triangle is not longer itself): its base
+/// mesh's triangles cut in two at the middle of their centres' box along its longest axis, again
+/// and again. A base mesh is cut for its largest instance (the largest scale of its transforms),
+/// so that every instance of it stays an instance. Object order is kept, parts in place of
+/// their object; part meshes are named `MESH [part K]`. Costs O(triangles · log) per cut mesh.
+pub fn split_large_objects(scene: &Scene, part_extent: f32) -> (Scene, SplitReport) {
+    // The largest scale each base mesh is drawn at.
+    let mut scale = vec![0.0f32; scene.meshes.len()];
+    for o in &scene.objects {
+        let s = &mut scale[o.mesh as usize];
+        *s = s.max(max_scale(&o.transform));
+    }
+    let mut report = SplitReport::default();
+    let mut out = Scene { meshes: Vec::new(), objects: Vec::new(), grid: scene.grid };
+    // The meshes each base mesh became in `out`.
+    let mut became: Vec<Vec<u32>> = Vec::with_capacity(scene.meshes.len());
+    for (m, base) in scene.meshes.iter().enumerate() {
+        let limit = part_extent / scale[m].max(f32::MIN_POSITIVE);
+        let parts = if scale[m] > 0.0 && base.mesh.bounds().extent().max_element() > 2.0 * limit {
+            cut(&base.mesh, limit)
+        } else {
+            Vec::new()
+        };
+        if parts.len() < 2 {
+            out.meshes.push(base.clone());
+            became.push(vec![out.meshes.len() as u32 - 1]);
+            continue;
+        }
+        report.meshes_split += 1;
+        let first = out.meshes.len() as u32;
+        out.meshes.extend(
+            parts.into_iter().enumerate().map(|(k, mesh)| BaseMesh { name: format!("{} [part {k}]", base.name), mesh }),
+        );
+        became.push((first..out.meshes.len() as u32).collect());
+    }
+    for o in &scene.objects {
+        let meshes = &became[o.mesh as usize];
+        if meshes.len() == 1 {
+            out.objects.push(Object { mesh: meshes[0], ..o.clone() });
+            continue;
+        }
+        report.objects_split += 1;
+        out.objects.extend(meshes.iter().enumerate().map(|(k, &mesh)| Object {
+            name: o.name.clone(),
+            mesh,
+            transform: o.transform,
+            part: Some(k as u32),
+        }));
+    }
+    report.objects = out.objects.len();
+    (out, report)
+}
+
+/// `mesh` cut into parts whose triangles' box is at most `limit` long (a part of one triangle
+/// may be longer), each with its own vertices; in a fixed order (low side first).
+fn cut(mesh: &Mesh, limit: f32) -> Vec<Mesh> {
+    let triangles: Vec<[Vec3; 3]> = mesh.triangles().collect();
+    let centre = |t: &[Vec3; 3]| (t[0] + t[1] + t[2]) / 3.0;
+    let mut parts = Vec::new();
+    let mut stack: Vec<Vec<u32>> = vec![(0..triangles.len() as u32).collect()];
+    while let Some(set) = stack.pop() {
+        let bounds = Aabb::from_points(set.iter().flat_map(|&t| triangles[t as usize]));
+        if set.len() <= 1 || bounds.extent().max_element() <= limit {
+            parts.push(set);
+            continue;
+        }
+        let centres = Aabb::from_points(set.iter().map(|&t| centre(&triangles[t as usize])));
+        let axis = centres.extent().max_position();
+        let middle = centres.center()[axis];
+        let (mut low, mut high): (Vec<u32>, Vec<u32>) =
+            set.iter().partition(|&&t| centre(&triangles[t as usize])[axis] < middle);
+        if low.is_empty() || high.is_empty() {
+            // Every centre at one place along the axis (a fan around a point): halve by order.
+            let mut all = if low.is_empty() { high } else { low };
+            high = all.split_off(all.len() / 2);
+            low = all;
+        }
+        // Popped last-in first: push high first so that parts come out low side first.
+        stack.push(high);
+        stack.push(low);
+    }
+    parts.into_iter().map(|set| submesh(mesh, &set)).collect()
+}
+
+/// The triangles `set` of `mesh` as a mesh of their own vertices, in first-use order.
+fn submesh(mesh: &Mesh, set: &[u32]) -> Mesh {
+    let mut index_of = std::collections::HashMap::new();
+    let mut out = Mesh::default();
+    for &t in set {
+        for &i in &mesh.indices[3 * t as usize..3 * t as usize + 3] {
+            let j = *index_of.entry(i).or_insert_with(|| {
+                out.positions.push(mesh.positions[i as usize]);
+                out.positions.len() as u32 - 1
+            });
+            out.indices.push(j);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Mat4;
+
+    use super::*;
+
+    /// A flat `size` × `size` slab at y = 0 of `n` × `n` quads.
+    fn slab(size: f32, n: u32) -> Mesh {
+        let mut m = Mesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                m.positions.push([size * i as f32 / n as f32, 0.0, size * j as f32 / n as f32]);
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * (n + 1) + i;
+                m.indices.extend([a, a + n + 1, a + 1, a + 1, a + n + 1, a + n + 2]);
+            }
+        }
+        m
+    }
+
+    fn scene_of(meshes: Vec<Mesh>, objects: &[(&str, u32, Mat4)]) -> Scene {
+        let mut s = Scene::default();
+        for (k, m) in meshes.into_iter().enumerate() {
+            s.add_mesh(&format!("m{k}"), m);
+        }
+        for &(name, mesh, t) in objects {
+            s.add_object(name, mesh, t);
+        }
+        s
+    }
+
+    #[test]
+    fn a_slab_far_larger_than_a_cell_is_cut_into_bounded_parts() {
+        let scene = scene_of(vec![slab(40.0, 40), Mesh::unit_cube()], &[("floor", 0, Mat4::IDENTITY), ("box", 1, Mat4::IDENTITY)]);
+        let (split, report) = split_large_objects(&scene, 4.0);
+        split.check().unwrap();
+        assert_eq!(report.meshes_split, 1);
+        assert_eq!(report.objects_split, 1);
+        let parts: Vec<&Object> = split.objects.iter().filter(|o| o.name == "floor").collect();
+        // 40 m cut at the middle until ≤ 4 m: 16 × 16 parts of 2.5 m.
+        assert_eq!(parts.len(), 256);
+        for (k, o) in parts.iter().enumerate() {
+            assert_eq!(o.part, Some(k as u32));
+            assert!(split.object_bounds(split.objects.iter().position(|x| x == *o).unwrap()).extent().max_element() <= 4.0);
+        }
+        // Nothing lost, nothing doubled; the small object kept whole.
+        assert_eq!(split.triangle_count(), scene.triangle_count());
+        let whole = split.objects.iter().find(|o| o.name == "box").unwrap();
+        assert_eq!(whole.part, None);
+        assert_eq!(split.meshes[whole.mesh as usize].mesh, Mesh::unit_cube());
+    }
+
+    #[test]
+    fn an_instanced_mesh_is_cut_once_and_its_instances_share_the_parts() {
+        let far = Mat4::from_translation(Vec3::new(100.0, 0.0, 0.0));
+        let scene = scene_of(vec![slab(20.0, 10)], &[("a", 0, Mat4::IDENTITY), ("b", 0, far)]);
+        let (split, report) = split_large_objects(&scene, 4.0);
+        split.check().unwrap();
+        assert_eq!((report.meshes_split, report.objects_split), (1, 2));
+        let meshes_of = |name: &str| -> Vec<u32> { split.objects.iter().filter(|o| o.name == name).map(|o| o.mesh).collect() };
+        assert_eq!(meshes_of("a"), meshes_of("b"));
+        assert_eq!(split.meshes.len(), meshes_of("a").len());
+        assert_eq!(split.stored_triangle_count(), scene.stored_triangle_count());
+    }
+
+    #[test]
+    fn a_mesh_is_cut_for_its_largest_instance_and_small_objects_stay_whole() {
+        // A 6 m slab is within twice 4 m: kept. Scaled by 4 in one instance it is 24 m: cut,
+        // for both instances alike.
+        let big = Mat4::from_scale(Vec3::splat(4.0));
+        let kept = scene_of(vec![slab(6.0, 6)], &[("a", 0, Mat4::IDENTITY)]);
+        assert_eq!(split_large_objects(&kept, 4.0).0, kept);
+        let scaled = scene_of(vec![slab(6.0, 6)], &[("a", 0, Mat4::IDENTITY), ("b", 0, big)]);
+        let (split, _) = split_large_objects(&scaled, 4.0);
+        assert!(split.objects.iter().filter(|o| o.name == "b").count() > 1);
+        for (i, o) in split.objects.iter().enumerate().filter(|(_, o)| o.name == "b") {
+            assert!(split.object_bounds(i).extent().max_element() <= 4.0 + 1e-4, "{o:?}");
+        }
+    }
+
+    #[test]
+    fn one_long_triangle_is_a_part_of_its_own() {
+        let mut m = Mesh { positions: vec![[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 0.0, 1.0]], indices: vec![0, 1, 2] };
+        m.positions.extend([[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]]);
+        m.indices.extend([3, 4, 5]);
+        let scene = scene_of(vec![m], &[("sliver", 0, Mat4::IDENTITY)]);
+        let (split, report) = split_large_objects(&scene, 4.0);
+        assert_eq!(report.objects, 2);
+        assert_eq!(split.triangle_count(), 2);
+    }
+}
