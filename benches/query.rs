@@ -69,7 +69,7 @@ fn walk(c: &mut Criterion, db: &Database, scale: CityScale) {
             b.iter(|| {
                 k ^= 1;
                 let step = session.step(pair[k], Some(Vec3::X)).unwrap();
-                debug_assert_eq!(step.flipped, flips);
+                assert_eq!(step.flipped, flips);
                 black_box(step)
             })
         });

@@ -99,7 +99,8 @@ impl ViewGrid {
 
     /// Cells in the grid.
     pub fn cell_count(&self) -> usize {
-        self.dims.iter().map(|&d| d as usize).product()
+        // Saturating: an unchecked grid's count must not wrap into a small one ([`ViewGrid::check`]).
+        self.dims.iter().fold(1usize, |n, &d| n.saturating_mul(d as usize))
     }
 
     /// The side lengths of one cell.
@@ -148,7 +149,7 @@ impl ViewGrid {
 
     /// Number of shared corner sample points.
     pub fn corner_count(&self) -> usize {
-        self.dims.iter().map(|&d| d as usize + 1).product()
+        self.dims.iter().fold(1usize, |n, &d| n.saturating_mul(d as usize + 1))
     }
 
     /// Linear id of corner (i, j, k), same axis order as cells.

@@ -675,8 +675,7 @@ fn walk_reports_fidelity_per_step_with_a_look() {
     path += &format!("{x},1.7,{z}\n");
     std::fs::write(s("walk.csv"), path).unwrap();
     assert_refused(&hdov(&["walk", &s("db"), "--path", &s("walk.csv"), "--fidelity", "--size", "0x9"]), "--size");
-    if hdov::gfx::adapter_available().is_none() {
-        println!("skipped: no graphics adapter");
+    if !hdov_testkit::gpu::adapter_or_skip() {
         return;
     }
     for method in ["visual", "review"] {
@@ -726,7 +725,7 @@ fn drawing_works_on_gl_alone_and_adapter_probes_stay_quiet() {
     let render = ["render", &s("db"), "--at", &at, "--look", "1,0,0", "--size", "64x40", "--out", &s("gl.png")];
     let o = run(true, &render);
     if stderr(&o).contains("no graphics adapter") && std::env::var("HDOV_REQUIRE_ADAPTER").as_deref() != Ok("1") {
-        println!("skipped: no GL adapter");
+        hdov_testkit::skip("no GL adapter");
         return;
     }
     assert!(o.status.success(), "render on GL: {}", stderr(&o));

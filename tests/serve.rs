@@ -354,7 +354,7 @@ fn the_viewer_draws_the_answer_in_a_real_browser() {
         ["chromium", "chromium-browser"].into_iter().find(|c| Command::new(c).arg("--version").output().is_ok());
     let Some(chromium) = chromium else {
         assert!(std::env::var("HDOV_REQUIRE_BROWSER").as_deref() != Ok("1"), "chromium is required");
-        println!("skipped: no chromium");
+        hdov_testkit::skip("no chromium");
         return;
     };
     let tmp = tempfile::tempdir().unwrap();

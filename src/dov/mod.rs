@@ -252,10 +252,13 @@ pub fn open_backend(
     kind: BackendKind,
     gpu: &gpu::GpuOptions,
 ) -> Result<Box<dyn DovBackend>> {
-    if !(1..=4096).contains(&resolution) {
+    // The one bound of the build's parameters; an adapter with a smaller texture limit is
+    // refused by the GPU backend itself, naming that limit.
+    let max = cubemap::MAX_RESOLUTION;
+    if !(1..=max).contains(&resolution) {
         return Err(crate::Error::bad_param(
             Param::Resolution,
-            format!("{resolution} is outside 1..=4096 texels per face edge"),
+            format!("{resolution} is outside 1..={max} texels per face edge (the bound of every build)"),
         ));
     }
     match kind {

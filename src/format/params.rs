@@ -427,16 +427,17 @@ impl BuildParams {
         {
             return Err(Error::bad_param(Param::ZeroDovFloor, format!("box margin {m} must be a finite length >= 0")));
         }
+        // The grid first: its cell count is only meaningful (and only fits a word) once checked.
+        if let Some(g) = grid {
+            // The adaptive budget is the most a cell can take.
+            check_grid(g, v.sampling.max_points_per_cell())?;
+        }
         if let Some(s) = v.shard {
             Shard::new(s.index, s.count).map_err(|r| Error::bad_param(Param::Shard, r))?;
             let cells = grid.map_or(MAX_CELLS, |g| g.cell_count() as u64);
             if u64::from(s.count) > cells {
                 return Err(Error::bad_param(Param::Shard, format!("{s}: more shards than the {cells} cells")));
             }
-        }
-        if let Some(g) = grid {
-            // The adaptive budget is the most a cell can take.
-            check_grid(g, v.sampling.max_points_per_cell())?;
         }
         Ok(())
     }
@@ -568,6 +569,20 @@ mod tests {
         let mut json = serde_json::to_value(BuildParams::default()).unwrap();
         json["visibility"]["shard"] = serde_json::json!([3, 3]);
         assert!(serde_json::from_value::<BuildParams>(json).unwrap_err().to_string().contains("0 ≤ I < N"));
+    }
+
+    #[test]
+    fn a_huge_grid_with_a_shard_is_refused_before_its_cells_are_counted() {
+        // 2^21 · 2^21 · 2^22 cells wraps to 0 in 64 bits: the grid must be refused as too big, not
+        // the shard as "more shards than the 0 cells".
+        let grid = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::ONE), [1 << 21, 1 << 21, 1 << 22]);
+        assert_eq!(grid.cell_count(), usize::MAX);
+        let p = BuildParams {
+            visibility: Some(VisibilityParams { shard: Some(Shard::new(0, 2).unwrap()), ..Default::default() }),
+            ..Default::default()
+        };
+        let err = p.check(Some(&grid)).unwrap_err().to_string();
+        assert!(err.starts_with("grid:") && err.contains("more than"), "{err}");
     }
 
     #[test]

@@ -10,7 +10,6 @@
 //! not needed. Compressed geometry (`KHR_draco_mesh_compression`, `EXT_meshopt_compression`) and
 //! quantized attributes (`KHR_mesh_quantization`) are refused, naming the extension.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use glam::{Mat4, Quat, Vec3};
@@ -112,7 +111,9 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     };
     let mut seen = vec![false; doc.nodes().count()];
     let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
-    let mut name_uses: HashMap<String, u32> = HashMap::new();
+    let node_name = |node: &gltf::Node| node.name().map_or_else(|| format!("node {}", node.index()), str::to_string);
+    let file_names: Vec<String> = doc.nodes().map(|n| node_name(&n)).collect();
+    let mut names = super::UniqueNames::new(file_names.iter().map(String::as_str));
     while let Some((node, parent)) = stack.pop() {
         if std::mem::replace(&mut seen[node.index()], true) {
             return Err(bad(format!("node {} is reached twice: a cycle or a node with two parents", node.index())));
@@ -126,11 +127,9 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
             match meshes[mesh.index()] {
                 None => warnings.push(format!("{}: node {}: its mesh has no triangles; skipped", path.display(), node.index())),
                 Some(m) => {
-                    let base = node.name().map_or_else(|| format!("node {}", node.index()), str::to_string);
+                    let base = node_name(&node);
                     for transform in instances(doc, &node, &buffers).map_err(|r| bad(format!("node {}: {r}", node.index())))? {
-                        let uses = name_uses.entry(base.clone()).or_insert(0);
-                        *uses += 1;
-                        let name = if *uses == 1 { base.clone() } else { format!("{base}#{uses}") };
+                        let name = names.give(&base);
                         scene.objects.push(Object { name, mesh: m, transform: world * transform, part: None });
                     }
                 }

@@ -124,6 +124,37 @@ impl Mesh {
     }
 }
 
+/// Object names that stay unique: the first use of a name keeps it, a repeat gets `#k`, the
+/// smallest k ≥ 2 that no name of the file and no earlier repeat has (a file with groups `a`,
+/// `a`, `a#2` gives `a`, `a#3`, `a#2`).
+pub(crate) struct UniqueNames {
+    /// Every name the file has, repeated or not.
+    in_file: std::collections::HashSet<String>,
+    /// Names given so far.
+    given: std::collections::HashSet<String>,
+}
+
+impl UniqueNames {
+    /// For a file whose names are `names`.
+    pub fn new<'a>(names: impl IntoIterator<Item = &'a str>) -> Self {
+        UniqueNames { in_file: names.into_iter().map(str::to_string).collect(), given: Default::default() }
+    }
+
+    /// The unique name for the next use of `name`.
+    pub fn give(&mut self, name: &str) -> String {
+        let unique = if self.given.contains(name) {
+            (2u64..)
+                .map(|k| format!("{name}#{k}"))
+                .find(|n| !self.in_file.contains(n) && !self.given.contains(n))
+                .expect("a free suffix exists")
+        } else {
+            name.to_string()
+        };
+        self.given.insert(unique.clone());
+        unique
+    }
+}
+
 /// Geometry stored once and instanced by objects.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BaseMesh {

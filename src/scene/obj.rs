@@ -2,7 +2,6 @@
 //! mesh); polygons are triangulated. Materials, normals and texture coordinates are ignored:
 //! visibility needs positions only.
 
-use std::collections::HashMap;
 use std::io::BufReader;
 use std::path::Path;
 
@@ -25,10 +24,12 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
 
     let mut warnings = Vec::new();
     let mut scene = Scene::default();
-    let mut name_uses: HashMap<String, usize> = HashMap::new();
+    let group_name = |name: &str| if name.is_empty() { "unnamed".to_string() } else { name.to_string() };
+    let file_names: Vec<String> = models.iter().map(|m| group_name(&m.name)).collect();
+    let mut names = super::UniqueNames::new(file_names.iter().map(String::as_str));
     for model in models {
         let m = model.mesh;
-        let group = if model.name.is_empty() { "unnamed".to_string() } else { model.name };
+        let group = group_name(&model.name);
         let mut mesh =
             Mesh { positions: m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(), indices: m.indices };
         mesh.drop_degenerate();
@@ -38,9 +39,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         }
         mesh.check().map_err(|r| Error::bad_file(path, format!("group '{group}': {r}")))?;
         // Repeated group names are common in CAD exports; suffixes keep object names unique.
-        let uses = name_uses.entry(group.clone()).or_insert(0);
-        *uses += 1;
-        let name = if *uses == 1 { group } else { format!("{group}#{uses}") };
+        let name = names.give(&group);
         scene.objects.push(Object { name: name.clone(), mesh: scene.meshes.len() as u32, transform: Mat4::IDENTITY, part: None });
         scene.meshes.push(BaseMesh { name, mesh });
     }
@@ -74,6 +73,16 @@ mod tests {
         assert_eq!(scene.triangle_count(), 4);
         assert_eq!(warnings.len(), 1, "{warnings:?}");
         assert!(warnings[0].contains("'empty'"));
+    }
+
+    #[test]
+    fn repeated_names_never_collide_with_a_name_the_file_has() {
+        // Issue 32: `a#2` suffixed onto the second `a` collided with the third group's own name.
+        let (_d, p) = write("v 0 0 0\nv 1 0 0\nv 1 1 0\no a\nf 1 2 3\no a\nf 1 2 3\no a#2\nf 1 2 3\no a\nf 1 2 3\n");
+        let (scene, _) = read(&p).unwrap();
+        let names: Vec<_> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["a", "a#3", "a#2", "a#4"]);
+        scene.check().unwrap();
     }
 
     #[test]

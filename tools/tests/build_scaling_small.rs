@@ -11,7 +11,7 @@ fn build_scaling_measures_each_scale() {
     if !tool.with_file_name("hdov").exists() {
         // `cargo test -p hdov-tools` alone builds no `hdov`; `.ci/run` and `cargo test --workspace` do.
         assert!(std::env::var("CI").is_err(), "no hdov beside {}", tool.display());
-        println!("skipped: no hdov beside {} (cargo build --release first)", tool.display());
+        hdov_testkit::skip(&format!("no hdov beside {} (cargo build --release first)", tool.display()));
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -13,7 +13,7 @@ fn serve_load_answers_every_request_as_the_library_does() {
     if !hdov.exists() {
         // `cargo test -p hdov-tools` alone builds no `hdov`; `.ci/run` and `cargo test --workspace` do.
         assert!(std::env::var("CI").is_err(), "{} is missing", hdov.display());
-        println!("skipped: no {} (cargo build --release first)", hdov.display());
+        hdov_testkit::skip(&format!("no {} (cargo build --release first)", hdov.display()));
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -49,7 +49,7 @@ struct Args {
     #[arg(long, value_name = "NAME,..", value_delimiter = ',', value_parser = PossibleValuesParser::new(EXPERIMENTS))]
     only: Vec<String>,
     /// Cube-map resolution R of every database built (default: 64).
-    #[arg(long, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(long, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=i64::from(hdov::format::limits::MAX_RESOLUTION)))]
     resolution: Option<u32>,
     /// No progress bars.
     #[arg(long)]

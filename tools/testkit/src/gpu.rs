@@ -17,10 +17,6 @@ pub fn adapter_or_skip() -> bool {
     if std::env::var(REQUIRE_ADAPTER_ENV).is_ok_and(|v| v == "1") {
         panic!("no wgpu adapter, and {REQUIRE_ADAPTER_ENV}=1 requires one");
     }
-    // Written to the stderr handle itself, not through `eprintln!`, which the test harness
-    // captures and hides for passing tests: a skip must show in `cargo test`'s output.
-    use std::io::Write;
-    let test = std::thread::current().name().unwrap_or("a GPU test").to_string();
-    let _ = writeln!(std::io::stderr(), "skipped: no adapter ({test})");
+    crate::skip("no adapter");
     false
 }

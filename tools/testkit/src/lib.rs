@@ -15,3 +15,11 @@ pub mod gpu;
 pub mod scenes;
 pub mod testdata;
 pub mod view_error;
+
+/// Prints `skipped: WHY (TEST)` where `cargo test` shows it: on the stderr handle itself, not
+/// through `println!` or `eprintln!`, which the test harness captures and hides for passing tests.
+pub fn skip(why: &str) {
+    use std::io::Write;
+    let test = std::thread::current().name().unwrap_or("a test").to_string();
+    let _ = writeln!(std::io::stderr(), "skipped: {why} ({test})");
+}

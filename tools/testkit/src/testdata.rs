@@ -11,7 +11,7 @@ pub const REQUIRE_TESTDATA_ENV: &str = "HDOV_REQUIRE_TESTDATA";
 /// [`REQUIRE_TESTDATA_ENV`] is `1`.
 pub fn skip_for_want_of(what: &str) {
     assert!(std::env::var(REQUIRE_TESTDATA_ENV).as_deref() != Ok("1"), "{what} is required ({REQUIRE_TESTDATA_ENV}=1)");
-    println!("skipped: no {what}");
+    crate::skip(&format!("no {what}"));
 }
 
 /// `/usr/share/assimp/models/SUB` where `assimp-testmodels` is installed; otherwise `None`,
