@@ -4,7 +4,8 @@
 # LODs, catalog) as one job, `hdov build --shard $SLURM_ARRAY_TASK_ID/N --base BASE` as an array
 # job after it (afterok; each shard keeps only its cells' V-data, measured against the base's
 # tree and LODs), and `hdov merge BASE SHARDS…` as a job after both; one task is cancelled
-# mid-run and requeued. The merged database must equal a
+# mid-build (its transaction open) and requeued; it must run again to the end, leave nothing of
+# its killed run behind, and the merged database must equal a
 # whole build, every data file byte for byte. Prints the wall times and the bytes the shards
 # and the base wrote.
 #
@@ -131,11 +132,11 @@ t0=$(date +%s.%N)
 "$HDOV" build "$SCENE" --out "$WORK/data/whole.hdov" --backend cpu >/dev/null
 t1=$(date +%s.%N)
 
-# The array job, one task per shard; each task sleeps a moment first so that one can be
-# cancelled while it runs.
+# The array job, one task per shard; each run of a task leaves a line in runs-ID first, so that
+# the requeued one can be seen to have run again.
 cat >"$WORK/shard.sh" <<EOF
 #!/bin/bash
-sleep 2
+echo "\$SLURM_JOB_ID \$(date +%s.%N)" >>"$WORK/log/runs-\$SLURM_ARRAY_TASK_ID"
 exec "$HDOV" build "$SCENE" --out "$WORK/data/shard\$SLURM_ARRAY_TASK_ID.hdov" \\
   --shard \$SLURM_ARRAY_TASK_ID/$N --base "$WORK/data/base.hdov" --backend cpu --force
 EOF
@@ -157,15 +158,23 @@ MERGE=$(sbatch --parsable --dependency=afterok:"$BASE":"$ARRAY" -o "$WORK/log/me
   || fail "sbatch of the merge job failed"
 echo "slurm: base job $BASE, array job $ARRAY ($N shards) after it, merge job $MERGE after both"
 
-# Cancel one running task and put it back in the queue.
+# Cancel one task while its hdov builds its database (its `.shardI.hdov.tmp-PID` directory open,
+# nothing yet at the target) and put it back in the queue.
 VICTIM=$((N - 1))
-for _ in $(seq 600); do
+writing=""
+for _ in $(seq 6000); do
   state=$(squeue -h -j "${ARRAY}_${VICTIM}" -o '%T' 2>/dev/null || true)
-  [ "$state" = RUNNING ] && break
-  sleep 0.1
+  if [ "$state" = RUNNING ] && [ ! -e "$WORK/data/shard$VICTIM.hdov" ]; then
+    writing=$(find "$WORK/data" -maxdepth 1 -name ".shard$VICTIM.hdov.tmp-*" -type d 2>/dev/null | head -1)
+    [ -n "$writing" ] && break
+  fi
+  [ -e "$WORK/data/shard$VICTIM.hdov" ] && fail "task $VICTIM finished before it could be cancelled while building"
+  sleep 0.02
 done
-[ "$state" = RUNNING ] || fail "task $VICTIM never ran (state '$state')"
+[ -n "$writing" ] || fail "task $VICTIM was never seen writing (state '$state')"
 scontrol requeue "${ARRAY}_${VICTIM}" || fail "requeue of task $VICTIM failed"
+[ ! -e "$WORK/data/shard$VICTIM.hdov" ] || fail "task $VICTIM had finished when it was cancelled"
+echo "slurm: task $VICTIM cancelled while building in $(basename "$writing")"
 # Slurm holds a requeued batch job back for two minutes (reason BeginTime); once it is pending
 # again, let it start now.
 for _ in $(seq 100); do
@@ -200,7 +209,14 @@ done
 t3=$(date +%s.%N)
 [ -z "$(squeue -h -j "$BASE,$ARRAY,$MERGE" 2>/dev/null)" ] || fail "jobs still queued after 10 minutes: $(squeue -h)"
 [ -d "$WORK/data/merged.hdov" ] || fail "the merge job wrote no database: $(cat "$WORK/log/merge.log" 2>/dev/null)"
-runs=$(grep -c . "$WORK/log/shard-$VICTIM.log" 2>/dev/null || echo 0)
+# The cancelled task ran again, to the end, and its first run's half-written directory is gone
+# (the next build of the same target removes what a dead process left).
+runs=$(grep -c . "$WORK/log/runs-$VICTIM" 2>/dev/null || echo 0)
+[ "$runs" -ge 2 ] || fail "task $VICTIM ran $runs time(s); the requeued run never started"
+[ -d "$WORK/data/shard$VICTIM.hdov" ] || fail "the requeued task $VICTIM wrote no database"
+leftover=$(find "$WORK/data" -maxdepth 1 -name ".shard$VICTIM.hdov.*" | head -1)
+[ -z "$leftover" ] || fail "the cancelled run of task $VICTIM left $leftover"
+echo "slurm: task $VICTIM ran $runs times; its last run finished the shard"
 
 # Every data file byte for byte; the manifests differ only in what the builds measured.
 for f in "$WORK"/data/whole.hdov/*; do
