@@ -151,6 +151,12 @@ fn bad_gltf_files_are_refused_in_one_line() {
             "base64",
         ),
         ("a URL", Box::new(|d| d["buffers"][0]["uri"] = json!("http://example.com/a.bin")), "not a file beside"),
+        (
+            // gltf-json's own check panicked on this (found by the scene_gltf fuzz target).
+            "an attribute past the accessors",
+            Box::new(|d| d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(9)),
+            "past the accessors",
+        ),
     ];
     for (what, edit, expect) in cases {
         let mut doc = good.clone();

@@ -47,6 +47,19 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     {
         use gltf::json::validation::Validate;
         let root = doc.as_json();
+        // gltf-json 1.4's mesh check reads a primitive's POSITION accessor without a bounds
+        // check (it panicked on an index past the accessors, found by the `scene_gltf` fuzz
+        // target): every attribute's index is checked here first.
+        let accessors = root.accessors.len();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (k, prim) in mesh.primitives.iter().enumerate() {
+                if let Some(i) = prim.attributes.values().map(|a| a.value()).find(|&i| i >= accessors) {
+                    return Err(bad(format!(
+                        "invalid glTF: mesh {m} primitive {k}: accessor {i} of {accessors} is past the accessors"
+                    )));
+                }
+            }
+        }
         let mut first: Option<String> = None;
         root.validate(root, gltf::json::Path::new, &mut |at, e| {
             let at = at();

@@ -58,7 +58,7 @@ fn db() -> &'static Db {
         // Kept for the life of the fuzzer (statics are never dropped): one small directory.
         let root = tempfile::tempdir().unwrap().keep();
         let dir = root.join("db");
-        hdov::build(&scene, &dir, &params, false, &Progress::hidden()).unwrap();
+        hdov::build(&scene, &dir, &params, hdov::Overwrite::Never, &Progress::hidden()).unwrap();
         let clean = FILES.iter().map(|&f| (f, std::fs::read(dir.join(f)).unwrap())).collect();
         read_all(&dir).expect("the clean database reads");
         Db { dir, clean }
