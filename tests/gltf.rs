@@ -166,6 +166,13 @@ fn bad_gltf_files_are_refused_in_one_line() {
         assert!(err.contains(expect), "{what}: expected '{expect}' in: {err}");
         assert!(err.contains("bad.gltf") && !err.contains('\n'), "{what}: {err}");
     }
+    // A GLB header declaring fewer bytes than itself (the gltf crate's unchecked subtraction,
+    // found by the scene_gltf fuzz target).
+    let mut short = hdov::export::glb(&document(bin.len(), None), &bin);
+    short[8..12].copy_from_slice(&3u32.to_le_bytes());
+    let path = dir.path().join("short.glb");
+    std::fs::write(&path, &short).unwrap();
+    assert!(Scene::load(&path).unwrap_err().to_string().contains("declares 3 bytes"));
     // A .glb cut short anywhere is refused, never a panic.
     let whole = hdov::export::glb(&document(bin.len(), None), &bin);
     for cut in [0, 4, 11, 12, 19, 40, whole.len() / 2, whole.len() - 1] {

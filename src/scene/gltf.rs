@@ -32,6 +32,15 @@ fn understood(ext: &str) -> bool {
 pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     let bad = |reason: String| Error::bad_file(path, reason);
     let bytes = super::files::read_whole(path)?;
+    // The gltf crate (1.4) subtracts the 12-byte header from a GLB's declared length unchecked
+    // (a panic where overflow is checked, found by the `scene_gltf` fuzz target): refuse a
+    // length shorter than the header itself first.
+    if let Some(declared) = bytes.strip_prefix(b"glTF").and_then(|b| b.get(4..8)) {
+        let declared = u32::from_le_bytes(declared.try_into().expect("four bytes"));
+        if declared < 12 {
+            return Err(bad(format!("not a glTF file: the GLB header declares {declared} bytes, fewer than the header's 12")));
+        }
+    }
     let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| bad(format!("not a glTF file: {e}")))?;
     let doc = &gltf.document;
     for ext in doc.extensions_required() {
