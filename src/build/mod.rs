@@ -194,7 +194,7 @@ pub fn objects_of<'a>(scene: &'a Scene, params: &BuildParams) -> std::borrow::Co
     match (params.objects, &scene.grid) {
         (ObjectParts::Geometry, Some(grid)) => {
             let extent = crate::scene::parts::part_extent_for_cells(grid.cell_size().max_element());
-            std::borrow::Cow::Owned(crate::scene::parts::split_large_objects(scene, extent).0)
+            std::borrow::Cow::Owned(crate::scene::parts::split_large_objects(scene, extent))
         }
         _ => std::borrow::Cow::Borrowed(scene),
     }

@@ -50,16 +50,13 @@ pub enum TreeAlgorithm {
     Linear,
 }
 
-/// Manifests record the variant (`"Str"`, serde's derive) since format 1; names are for
-/// command lines.
-impl hdov_storage::Named for TreeAlgorithm {
-    const WHAT: &'static str = "tree algorithm";
+impl TreeAlgorithm {
+    /// Both algorithms.
+    pub const ALL: [TreeAlgorithm; 2] = [TreeAlgorithm::Str, TreeAlgorithm::Linear];
 
-    fn all() -> &'static [Self] {
-        &[TreeAlgorithm::Str, TreeAlgorithm::Linear]
-    }
-
-    fn name(self) -> &'static str {
+    /// The name `--tree` takes. Manifests record the variant instead (`"Str"`, serde's derive)
+    /// since format 1.
+    pub fn name(self) -> &'static str {
         match self {
             Self::Str => "str",
             Self::Linear => "linear",
@@ -67,6 +64,7 @@ impl hdov_storage::Named for TreeAlgorithm {
     }
 }
 
+hdov_storage::named!(TreeAlgorithm, "tree algorithm");
 hdov_storage::by_names!(TreeAlgorithm);
 
 /// An R-tree whose node ids are depth-first numbers (root = 0).

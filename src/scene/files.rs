@@ -35,29 +35,33 @@ pub fn beside(scene: &Path, name: &str) -> Result<PathBuf> {
 /// The first `declared` bytes of `file`, which must be a regular file of `declared` bytes, or
 /// up to `slack` more (padding); checked before a byte is read or allocated.
 pub fn read_declared(file: &Path, declared: u64, slack: u64) -> Result<Vec<u8>> {
-    let meta = std::fs::metadata(file).map_err(|e| Error::io(file, e))?;
-    if !meta.is_file() {
-        return Err(Error::bad_file(file, "is not a regular file"));
-    }
+    let len = regular_file_len(file)?;
     if declared > MAX_FILE_BYTES {
         return Err(Error::bad_file(file, format!("declares {declared} bytes, more than {MAX_FILE_BYTES}")));
     }
-    if meta.len() < declared || meta.len() > declared + slack {
-        return Err(Error::bad_file(file, format!("holds {} bytes, the scene declares {declared}", meta.len())));
+    if len < declared || len > declared + slack {
+        return Err(Error::bad_file(file, format!("holds {len} bytes, the scene declares {declared}")));
     }
     read_at_most(file, declared)
 }
 
 /// A whole regular file of at most [`MAX_FILE_BYTES`] bytes (a scene file itself).
 pub fn read_whole(file: &Path) -> Result<Vec<u8>> {
+    let len = regular_file_len(file)?;
+    if len > MAX_FILE_BYTES {
+        return Err(Error::bad_file(file, format!("holds {len} bytes, more than {MAX_FILE_BYTES}")));
+    }
+    read_at_most(file, len)
+}
+
+/// The length of `file`, refused unless it is a regular file (a device such as `/dev/zero`
+/// reports no length and never ends).
+fn regular_file_len(file: &Path) -> Result<u64> {
     let meta = std::fs::metadata(file).map_err(|e| Error::io(file, e))?;
     if !meta.is_file() {
         return Err(Error::bad_file(file, "is not a regular file"));
     }
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(Error::bad_file(file, format!("holds {} bytes, more than {MAX_FILE_BYTES}", meta.len())));
-    }
-    read_at_most(file, meta.len())
+    Ok(meta.len())
 }
 
 /// At most `len` bytes of `file` (fewer if it shrank meanwhile), never more.

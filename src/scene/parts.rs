@@ -20,31 +20,19 @@ pub fn part_extent_for_cells(cell_edge: f32) -> f32 {
     2.0 * cell_edge
 }
 
-/// What splitting did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct SplitReport {
-    /// Base meshes cut into parts.
-    pub meshes_split: usize,
-    /// Objects cut into parts.
-    pub objects_split: usize,
-    /// Objects after the split.
-    pub objects: usize,
-}
-
 /// `scene` with every object whose world extent is more than twice `part_extent` replaced by
 /// parts no longer than `part_extent` (where a single triangle is not longer itself): its base
 /// mesh's triangles cut in two at the middle of their centres' box along its longest axis, again
 /// and again. A base mesh is cut for its largest instance (the largest scale of its transforms),
 /// so that every instance of it stays an instance. Object order is kept, parts in place of
 /// their object; part meshes are named `MESH [part K]`. Costs O(triangles · log) per cut mesh.
-pub fn split_large_objects(scene: &Scene, part_extent: f32) -> (Scene, SplitReport) {
+pub fn split_large_objects(scene: &Scene, part_extent: f32) -> Scene {
     // The largest scale each base mesh is drawn at.
     let mut scale = vec![0.0f32; scene.meshes.len()];
     for o in &scene.objects {
         let s = &mut scale[o.mesh as usize];
         *s = s.max(max_scale(&o.transform));
     }
-    let mut report = SplitReport::default();
     let mut out = Scene { meshes: Vec::new(), objects: Vec::new(), grid: scene.grid };
     // The meshes each base mesh became in `out`.
     let mut became: Vec<Vec<u32>> = Vec::with_capacity(scene.meshes.len());
@@ -60,7 +48,6 @@ pub fn split_large_objects(scene: &Scene, part_extent: f32) -> (Scene, SplitRepo
             became.push(vec![out.meshes.len() as u32 - 1]);
             continue;
         }
-        report.meshes_split += 1;
         let first = out.meshes.len() as u32;
         out.meshes.extend(
             parts.into_iter().enumerate().map(|(k, mesh)| BaseMesh { name: format!("{} [part {k}]", base.name), mesh }),
@@ -73,7 +60,6 @@ pub fn split_large_objects(scene: &Scene, part_extent: f32) -> (Scene, SplitRepo
             out.objects.push(Object { mesh: meshes[0], ..o.clone() });
             continue;
         }
-        report.objects_split += 1;
         out.objects.extend(meshes.iter().enumerate().map(|(k, &mesh)| Object {
             name: o.name.clone(),
             mesh,
@@ -81,8 +67,7 @@ pub fn split_large_objects(scene: &Scene, part_extent: f32) -> (Scene, SplitRepo
             part: Some(k as u32),
         }));
     }
-    report.objects = out.objects.len();
-    (out, report)
+    out
 }
 
 /// `mesh` cut into parts whose triangles' box is at most `limit` long (a part of one triangle
@@ -169,10 +154,11 @@ mod tests {
     #[test]
     fn a_slab_far_larger_than_a_cell_is_cut_into_bounded_parts() {
         let scene = scene_of(vec![slab(40.0, 40), Mesh::unit_cube()], &[("floor", 0, Mat4::IDENTITY), ("box", 1, Mat4::IDENTITY)]);
-        let (split, report) = split_large_objects(&scene, 4.0);
+        let split = split_large_objects(&scene, 4.0);
         split.check().unwrap();
-        assert_eq!(report.meshes_split, 1);
-        assert_eq!(report.objects_split, 1);
+        // One mesh cut (the box's stays one), one object cut.
+        assert_eq!(split.meshes.iter().filter(|m| m.name.starts_with("m0 [part")).count() + 1, split.meshes.len());
+        assert_eq!(split.objects.iter().filter(|o| o.part.is_none()).count(), 1);
         let parts: Vec<&Object> = split.objects.iter().filter(|o| o.name == "floor").collect();
         // 40 m cut at the middle until ≤ 4 m: 16 × 16 parts of 2.5 m.
         assert_eq!(parts.len(), 256);
@@ -191,9 +177,11 @@ mod tests {
     fn an_instanced_mesh_is_cut_once_and_its_instances_share_the_parts() {
         let far = Mat4::from_translation(Vec3::new(100.0, 0.0, 0.0));
         let scene = scene_of(vec![slab(20.0, 10)], &[("a", 0, Mat4::IDENTITY), ("b", 0, far)]);
-        let (split, report) = split_large_objects(&scene, 4.0);
+        let split = split_large_objects(&scene, 4.0);
         split.check().unwrap();
-        assert_eq!((report.meshes_split, report.objects_split), (1, 2));
+        // Both objects cut, into parts of one cut mesh.
+        assert!(split.objects.iter().all(|o| o.part.is_some()));
+        assert!(split.meshes.iter().all(|m| m.name.starts_with("m0 [part")));
         let meshes_of = |name: &str| -> Vec<u32> { split.objects.iter().filter(|o| o.name == name).map(|o| o.mesh).collect() };
         assert_eq!(meshes_of("a"), meshes_of("b"));
         assert_eq!(split.meshes.len(), meshes_of("a").len());
@@ -206,9 +194,9 @@ mod tests {
         // for both instances alike.
         let big = Mat4::from_scale(Vec3::splat(4.0));
         let kept = scene_of(vec![slab(6.0, 6)], &[("a", 0, Mat4::IDENTITY)]);
-        assert_eq!(split_large_objects(&kept, 4.0).0, kept);
+        assert_eq!(split_large_objects(&kept, 4.0), kept);
         let scaled = scene_of(vec![slab(6.0, 6)], &[("a", 0, Mat4::IDENTITY), ("b", 0, big)]);
-        let (split, _) = split_large_objects(&scaled, 4.0);
+        let split = split_large_objects(&scaled, 4.0);
         assert!(split.objects.iter().filter(|o| o.name == "b").count() > 1);
         for (i, o) in split.objects.iter().enumerate().filter(|(_, o)| o.name == "b") {
             assert!(split.object_bounds(i).extent().max_element() <= 4.0 + 1e-4, "{o:?}");
@@ -221,8 +209,8 @@ mod tests {
         m.positions.extend([[0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]]);
         m.indices.extend([3, 4, 5]);
         let scene = scene_of(vec![m], &[("sliver", 0, Mat4::IDENTITY)]);
-        let (split, report) = split_large_objects(&scene, 4.0);
-        assert_eq!(report.objects, 2);
+        let split = split_large_objects(&scene, 4.0);
+        assert_eq!(split.objects.len(), 2);
         assert_eq!(split.triangle_count(), 2);
     }
 }

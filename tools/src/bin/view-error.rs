@@ -37,7 +37,9 @@ use glam::Vec3;
 use hdov::dov::sampling::is_inside;
 use hdov::dov::{DovBackend, IdCube};
 use hdov::render::{ColorMode, NO_ITEM, Renderer, View};
-use hdov::{BackendKind, BuildParams, Database, FloorTest, Mode, Overwrite, Progress, QueryParams, Sampling};
+use hdov::{
+    BackendKind, BuildParams, Database, FloorTest, Mode, ObjectParts, Overwrite, Progress, QueryParams, Sampling,
+};
 use hdov::{ItemKind, VisibilityParams};
 use hdov_testkit::scenes::Rng;
 use hdov_testkit::view_error::{dov_excess, frame_error, random_viewpoint, wrong_share};
@@ -127,6 +129,10 @@ struct Args {
     /// Write the chart of mean wrong share against visibility time (SVG) to this file.
     #[arg(long, value_name = "OUT.svg")]
     chart: Option<PathBuf>,
+    /// Objects of the builds: file (the scene's, as they are) or geometry (each far larger than
+    /// a cell cut into parts of two cells, `hdov build --objects`).
+    #[arg(long, default_value = "file")]
+    objects: ObjectParts,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -142,7 +148,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     scene.grid = Some(grid);
     // The objects the databases hold (large ones cut into parts, `--objects geometry`), whose ids
     // their answers name: the truth is measured on them.
-    let measured = hdov::objects_of(&scene, &BuildParams::default()).into_owned();
+    let built = BuildParams { objects: args.objects, ..Default::default() };
+    let measured = hdov::objects_of(&scene, &built).into_owned();
     println!("{}", hdov_tools::machine());
 
     // Cells: all, or a seeded subset.
@@ -221,7 +228,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let report = hdov::build(
             &scene,
             &dir,
-            &BuildParams { visibility: Some(visibility), ..Default::default() },
+            &BuildParams { visibility: Some(visibility), ..built.clone() },
             Overwrite::Never,
             &Progress::hidden(),
         )?;
