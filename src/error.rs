@@ -55,6 +55,8 @@ pub enum Param {
     Backend,
     /// The city generator's block counts.
     Blocks,
+    /// The eye heights above a floor where view cells are made.
+    EyeHeights,
     /// A query or session camera.
     Camera,
     /// The viewing cells' size.
@@ -134,6 +136,7 @@ impl Param {
             Param::At => "at",
             Param::Backend => "backend",
             Param::Blocks => "blocks",
+            Param::EyeHeights => "eye_heights",
             Param::Camera => "camera",
             Param::CellSize => "cell_size",
             Param::DovCodec => "dov_codec",

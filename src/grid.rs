@@ -1,4 +1,6 @@
-//! The viewing-cell grid: a box region cut into nx × ny × nz cells (y is height).
+//! The viewing-cell grid: a box region cut into nx × ny × nz cells (y is height), every one of
+//! them a view cell, or only those of a [`CellSet`] (the places a viewer can stand, found from
+//! the geometry by `scene::standable`): the lattice then only numbers the cells.
 //!
 //! Sample points are the cell corners, shared between neighbouring cells: a grid of nx × ny × nz
 //! cells has (nx+1)(ny+1)(nz+1) corners, each measured once.
@@ -9,12 +11,72 @@ use serde::{Deserialize, Serialize};
 use crate::geom::Aabb;
 
 /// A regular grid of viewing cells over a region: the cells whose visibility a database stores.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ViewGrid {
     /// The box the cells tile.
     pub region: Aabb,
     /// Cells along x, y (height layers) and z.
     pub dims: [u32; 3],
+    /// The cells that are view cells; `None`: all of them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub present: Option<CellSet>,
+}
+
+/// A set of cell ids, as sorted runs `[first, end)`: the view cells of a sparse grid (a storey
+/// is a few runs per row of cells).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct CellSet {
+    runs: Vec<[u32; 2]>,
+}
+
+impl CellSet {
+    /// The set of `ids`, in any order, repeats allowed.
+    pub fn from_ids(mut ids: Vec<u32>) -> CellSet {
+        ids.sort_unstable();
+        ids.dedup();
+        let mut runs: Vec<[u32; 2]> = Vec::new();
+        for id in ids {
+            match runs.last_mut() {
+                Some(run) if run[1] == id => run[1] += 1,
+                _ => runs.push([id, id + 1]),
+            }
+        }
+        CellSet { runs }
+    }
+
+    /// Whether `id` is in the set.
+    pub fn contains(&self, id: usize) -> bool {
+        let i = self.runs.partition_point(|r| (r[1] as usize) <= id);
+        self.runs.get(i).is_some_and(|r| r[0] as usize <= id)
+    }
+
+    /// The ids, ascending.
+    pub fn ids(&self) -> impl Iterator<Item = usize> + '_ {
+        self.runs.iter().flat_map(|r| r[0] as usize..r[1] as usize)
+    }
+
+    /// How many ids.
+    pub fn len(&self) -> usize {
+        self.runs.iter().map(|r| (r[1] - r[0]) as usize).sum()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.runs.is_empty()
+    }
+
+    /// Checks that the runs are ascending, apart, non-empty and below `end`.
+    pub fn check(&self, end: usize) -> Result<(), String> {
+        let mut last = None;
+        for r in &self.runs {
+            if r[0] >= r[1] || last.is_some_and(|l| r[0] <= l) || r[1] as usize > end {
+                return Err(format!("cell run {r:?} is empty, out of order, touches the one before or ends past {end}"));
+            }
+            last = Some(r[1]);
+        }
+        Ok(())
+    }
 }
 
 /// The ids `id` gives the lattice points of the box whose range along each axis is
@@ -36,9 +98,9 @@ impl ViewGrid {
     /// u32 with room to spare, and a mistyped grid is refused instead of allocated.
     pub const MAX_CELLS: u64 = 1 << 22;
 
-    /// A grid of `dims` cells (x, y, z) over `region`.
+    /// A grid of `dims` cells (x, y, z) over `region`, every cell a view cell.
     pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
-        Self { region, dims }
+        Self { region, dims, present: None }
     }
 
     /// The grid a build uses. Region: `region`, else the scene's own grid's, else the footprint
@@ -53,7 +115,7 @@ impl ViewGrid {
         cell_size: Option<f32>,
     ) -> crate::Result<ViewGrid> {
         use crate::error::{Error, Param};
-        let region = region.or(scene_grid.map(|g| g.region)).unwrap_or_else(|| {
+        let region = region.or(scene_grid.as_ref().map(|g| g.region)).unwrap_or_else(|| {
             let y = bounds.min.y;
             Aabb::new(Vec3::new(bounds.min.x, y + 1.5, bounds.min.z), Vec3::new(bounds.max.x, y + 2.0, bounds.max.z))
         });
@@ -94,10 +156,34 @@ impl ViewGrid {
         if self.dims.contains(&0) {
             return Err(format!("grid dims {:?} must all be at least 1", self.dims));
         }
+        if let Some(set) = &self.present {
+            set.check(self.cell_count())?;
+            if set.is_empty() {
+                return Err("the grid has no view cell".into());
+            }
+        }
         Ok(())
     }
 
-    /// Cells in the grid.
+    /// Whether cell `id` is a view cell.
+    pub fn is_present(&self, id: usize) -> bool {
+        id < self.cell_count() && self.present.as_ref().is_none_or(|s| s.contains(id))
+    }
+
+    /// The ids of the view cells, ascending.
+    pub fn present_ids(&self) -> Box<dyn Iterator<Item = usize> + '_> {
+        match &self.present {
+            Some(set) => Box::new(set.ids()),
+            None => Box::new(0..self.cell_count()),
+        }
+    }
+
+    /// How many view cells.
+    pub fn present_count(&self) -> usize {
+        self.present.as_ref().map_or(self.cell_count(), CellSet::len)
+    }
+
+    /// Cells in the lattice: the ids run below it (view cells or not).
     pub fn cell_count(&self) -> usize {
         // Saturating: an unchecked grid's count must not wrap into a small one ([`ViewGrid::check`]).
         self.dims.iter().fold(1usize, |n, &d| n.saturating_mul(d as usize))
@@ -183,6 +269,24 @@ impl ViewGrid {
         lattice_block(|a| c[a].saturating_sub(ring)..=(c[a] + 1 + ring).min(self.dims[a]), |p| self.corner_id(p))
     }
 
+    /// The corner ids of the view cells within `ring` cells of cell `c`, ascending: in a grid
+    /// of view cells only, the corners where a viewer nearly is (not those of cells inside a
+    /// solid or across a floor); [`ViewGrid::neighbourhood_corners`] otherwise.
+    pub fn neighbourhood_view_corners(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
+        if self.present.is_none() {
+            return self.neighbourhood_corners(c, ring);
+        }
+        let mut out: Vec<usize> = self
+            .neighbourhood_cells(c, ring)
+            .into_iter()
+            .filter(|&id| self.is_present(id))
+            .flat_map(|id| self.cell_corners(self.cell_coords(id)))
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
     /// The ids of the cells within `ring` cells of cell `c` (itself included), clipped to the
     /// grid; x fastest, then z, then y.
     pub fn neighbourhood_cells(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
@@ -208,6 +312,28 @@ mod tests {
         let b = g.cell_corners([1, 0, 0]);
         assert_eq!(a.iter().filter(|x| b.contains(x)).count(), 4);
         assert_eq!(g.corner_count(), 5 * 3 * 4);
+    }
+
+    #[test]
+    fn cell_sets_hold_their_ids_and_nothing_else() {
+        let set = CellSet::from_ids(vec![7, 3, 4, 5, 9, 3]);
+        assert_eq!(set.ids().collect::<Vec<_>>(), vec![3, 4, 5, 7, 9]);
+        assert_eq!(set.len(), 5);
+        assert!((0..12).all(|id| set.contains(id) == [3, 4, 5, 7, 9].contains(&id)));
+        assert!(set.check(10).is_ok());
+        assert!(set.check(9).is_err());
+        let mut g = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::new(4.0, 2.0, 4.0)), [4, 1, 4]);
+        g.present = Some(set);
+        assert!(g.check().is_ok());
+        assert_eq!(g.present_ids().collect::<Vec<_>>(), vec![3, 4, 5, 7, 9]);
+        assert!(g.is_present(9) && !g.is_present(8) && !g.is_present(16));
+        let json = serde_json::to_string(&g).unwrap();
+        assert!(json.contains("\"present\":[[3,6],[7,8],[9,10]]"), "{json}");
+        assert_eq!(serde_json::from_str::<ViewGrid>(&json).unwrap(), g);
+        let bad: CellSet = serde_json::from_str("[[3,6],[5,8]]").unwrap();
+        assert!(bad.check(16).is_err());
+        g.present = Some(CellSet::default());
+        assert!(g.check().is_err());
     }
 
     #[test]

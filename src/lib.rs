@@ -64,6 +64,7 @@ internal_modules!(
 pub mod city;
 pub mod render;
 pub mod review;
+pub mod text;
 
 pub use build::{BuildReport, build, build_shard_on, merge::merge, objects_of};
 pub use camera::Camera;
@@ -87,4 +88,5 @@ pub use query::{
     Answer, DEFAULT_ETA, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step,
 };
 pub use rtree::TreeAlgorithm;
+pub use scene::standable::EyeHeights;
 pub use scene::{Mesh, Scene};

@@ -17,11 +17,11 @@ const LAYERS: &[&[&str]] = &[
     &["dov"],
     &["db"],
     &["build", "query"],
-    &["review", "render", "export"],
+    &["review", "render", "export", "text"],
 ];
 
 /// The modules on the library's public face (the rest is private without `internals`).
-const PUBLIC_MODULES: &[&str] = &["city", "render", "review"];
+const PUBLIC_MODULES: &[&str] = &["city", "render", "review", "text"];
 
 /// Whether `path` (after `hdov::`) names a root function such as `build(` or `open_backend(`.
 fn is_function(path: &str) -> bool {

@@ -125,7 +125,7 @@ fn blocks_override_the_scale() {
     assert_eq!(one_details, 4, "a one-block city has statues at its four street corners");
     assert!((4..=40).contains(&(one.objects.len() - one_details)), "{} buildings on one block", one.objects.len() - 4);
     assert!(wide.objects.len() > tiny.objects.len() * 2, "{} vs {}", wide.objects.len(), tiny.objects.len());
-    let [w, d] = [wide.grid.unwrap().region.extent().x, wide.grid.unwrap().region.extent().z];
+    let [w, d] = [wide.grid.clone().unwrap().region.extent().x, wide.grid.clone().unwrap().region.extent().z];
     assert!(w > d * 2.0, "6 x 2 blocks make a wide city: {w} x {d}");
 }
 
@@ -136,7 +136,7 @@ fn large_scale_has_the_thesis_size() {
     assert!(large.objects.len() >= 10_000, "{} objects", large.objects.len());
     assert!(large.triangle_count() >= 20_000_000, "{} triangles over instances", large.triangle_count());
     assert!(large.stored_triangle_count() < large.triangle_count() / 2 + 1);
-    let cells = large.grid.unwrap().cell_count();
+    let cells = large.grid.clone().unwrap().cell_count();
     assert!((2_000..=8_000).contains(&cells), "{cells} cells");
     large.check().unwrap();
 }
@@ -184,7 +184,7 @@ fn every_building_of_the_default_city_is_in_budget() {
 fn buildings_and_statues_keep_apart_inside_the_grid() {
     for (scale, seed) in [(CityScale::Small, 1), (CityScale::Tiny, 2)] {
         let scene = city(scale, seed);
-        let grid = scene.grid.expect("the city brings its grid");
+        let grid = scene.grid.clone().expect("the city brings its grid");
         let bounds = scene.all_object_bounds();
         for (o, b) in bounds.iter().enumerate() {
             let inside = grid.region.min.x <= b.min.x
@@ -217,7 +217,7 @@ fn grid_sits_at_eye_height_with_sensible_cell_counts() {
     for (scale, cells) in [(CityScale::Tiny, 16..=64), (CityScale::Small, 120..=320), (CityScale::Default, 300..=1_000)]
     {
         let scene = city(scale, 11);
-        let grid = scene.grid.unwrap();
+        let grid = scene.grid.clone().unwrap();
         grid.check().unwrap();
         assert_eq!(grid.dims[1], 1);
         assert_eq!((grid.region.min.y, grid.region.max.y), (1.5, 2.0));

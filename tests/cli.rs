@@ -233,6 +233,31 @@ fn obj_groups_become_objects() {
 }
 
 #[test]
+fn a_building_gets_cells_on_both_storeys() {
+    // Issue 31: `hdov build --cell-size 2` refused (5, 4.6, 5), upstairs, as outside the grid.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("building.json");
+    hdov_testkit::scenes::two_storey_building().write_manifest(&scene, hdov::Overwrite::Never).unwrap();
+    let db = tmp.path().join("db");
+    let (scene, db_s) = (scene.to_str().unwrap(), db.to_str().unwrap());
+    let o = hdov(&["build", scene, "--out", db_s, "--cell-size", "2", "--resolution", "16", "--samples", "corners"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for at in ["5,4.6,5", "2,1.7,2"] {
+        let o = hdov(&["query", db_s, "--at", at]);
+        assert!(o.status.success(), "{at}: {}", stderr(&o));
+    }
+    assert_refused(&hdov(&["query", db_s, "--at", "7.5,1.6,7.5"]), "is in no view cell");
+    let info: serde_json::Value = serde_json::from_slice(&hdov(&["info", db_s, "--json"]).stdout).unwrap();
+    assert_eq!(info["grid"]["sparse"], true);
+    let cells = hdov(&["info", db_s, "--cells", "--json"]);
+    let lines: Vec<serde_json::Value> = stdout_of(&cells).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len() as u64, info["cells"].as_u64().unwrap());
+    assert!(lines.iter().any(|c| c["min"][1].as_f64().unwrap() > 3.3), "no cell upstairs");
+    let text = stdout_of(&hdov(&["info", db_s]));
+    assert!(text.contains("where a viewer can stand"), "{text}");
+}
+
+#[test]
 fn bad_input_is_one_line_and_nonzero() {
     let tmp = tempfile::tempdir().unwrap();
     let p = |n: &str| tmp.path().join(n).to_str().unwrap().to_string();

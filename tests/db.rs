@@ -6,7 +6,7 @@ use glam::Mat4;
 use hdov::scene::{BaseMesh, Object, Scene};
 
 use hdov::Overwrite;
-use hdov::format::TREE_FILE;
+use hdov::format::{FORMAT_VERSION, TREE_FILE};
 use hdov::progress::Progress;
 use hdov::rtree::{RTree, TreeAlgorithm};
 use hdov::{BuildParams, Database};
@@ -97,6 +97,11 @@ fn empty_meshes_are_refused() {
 }
 
 /// Copies a database and applies `damage` to one of its files.
+/// The manifest's version field as written.
+fn version(v: u32) -> String {
+    format!("\"format_version\": {v}")
+}
+
 fn damaged(src: &Path, file: &str, damage: impl FnOnce(&mut Vec<u8>)) -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
     for e in std::fs::read_dir(src).unwrap() {
@@ -153,20 +158,17 @@ fn damaged_files_are_refused_with_a_clear_error() {
         (
             "manifest.json",
             Box::new(|b| {
-                *b = String::from_utf8(b.clone())
-                    .unwrap()
-                    .replace("\"format_version\": 4", "\"format_version\": 9")
-                    .into_bytes()
+                *b = String::from_utf8(b.clone()).unwrap().replace(&version(FORMAT_VERSION), &version(9)).into_bytes()
             }),
             "version 9",
         ),
         (
-            // A database of the previous format (before internal LODs by geometric error).
+            // A database of the previous format (before view cells where a viewer can stand).
             "manifest.json",
             Box::new(|b| {
                 *b = String::from_utf8(b.clone())
                     .unwrap()
-                    .replace("\"format_version\": 4", "\"format_version\": 3")
+                    .replace(&version(FORMAT_VERSION), &version(FORMAT_VERSION - 1))
                     .into_bytes()
             }),
             "rebuild it",

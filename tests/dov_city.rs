@@ -11,7 +11,7 @@ use hdov_testkit::gpu::adapter_or_skip;
 const R: u32 = 48;
 
 fn run(backend: &mut dyn DovBackend, scene: &hdov::scene::Scene, shape: &TreeShape) -> Vec<(u32, CellDov)> {
-    let grid = scene.grid.unwrap();
+    let grid = scene.grid.clone().unwrap();
     let opts = PrecomputeOptions::default();
     precompute_shard(
         backend,

@@ -24,7 +24,7 @@ fn lod_drawing_matches_full_detail_and_draws_less() {
     let options = GpuOptions { lods: Some(&lods), ..Default::default() };
     let mut lod = GpuBackend::with_options(&scene, r, &options).unwrap();
     assert!(lod.lod_drawing() && !full.lod_drawing());
-    let points = hdov::dov::open_corners(&scene.grid.unwrap(), &mut full, 4).unwrap();
+    let points = hdov::dov::open_corners(&scene.grid.clone().unwrap(), &mut full, 4).unwrap();
     assert!(points.len() >= 3, "the city should have open street corners");
     let floor = full.cube_map().texel_floor();
     let before = full.triangles_drawn();
@@ -54,7 +54,7 @@ fn zero_tolerance_is_full_detail() {
     let options = GpuOptions { lods: Some(&lods), lod_tolerance_texels: 0.0, ..Default::default() };
     let mut lod = GpuBackend::with_options(&scene, r, &options).unwrap();
     assert!(!lod.lod_drawing());
-    let grid = scene.grid.unwrap();
+    let grid = scene.grid.clone().unwrap();
     let p = grid.corner_position(grid.corner_coords(grid.corner_count() / 2));
     assert_eq!(full.measure(p).unwrap(), lod.measure(p).unwrap());
     assert_eq!(full.triangles_drawn(), lod.triangles_drawn());

@@ -94,10 +94,10 @@ fn triangle_set(mesh: &hdov::Mesh) -> Vec<[[u32; 3]; 3]> {
 fn the_default_city_built_from_its_gltf_export_equals_the_original() {
     let tmp = tempfile::tempdir().unwrap();
     let mut scene = hdov::city::generate(&CityParams::default()).unwrap();
-    let grid = scene.grid.unwrap();
+    let grid = scene.grid.clone().unwrap();
     let (min, size) = (grid.cell_box([grid.dims[0] / 2, 0, grid.dims[2] / 2]).min, grid.cell_size());
     let block = hdov::ViewGrid::new(hdov::Aabb::new(min, min + size * glam::Vec3::new(2.0, 1.0, 2.0)), [2, 1, 2]);
-    scene.grid = Some(block);
+    scene.grid = Some(block.clone());
     let params = BuildParams {
         visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()
@@ -117,7 +117,7 @@ fn the_default_city_built_from_its_gltf_export_equals_the_original() {
         assert_eq!(triangle_set(back.object_mesh(k)), triangle_set(scene.object_mesh(k)), "{}", a.name);
         assert!(a.transform.abs_diff_eq(b.transform, 1e-4), "{}", a.name);
     }
-    back.grid = Some(block); // glTF carries no viewing grid
+    back.grid = Some(block.clone()); // glTF carries no viewing grid
     hdov::build(&back, &tmp.path().join("again"), &params, Overwrite::Never, &Progress::hidden()).unwrap();
     let again = Database::open(&tmp.path().join("again")).unwrap();
     let (a, b) = (db.info().unwrap(), again.info().unwrap());

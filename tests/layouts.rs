@@ -34,7 +34,7 @@ fn fixture() -> Fixture {
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
     let mut backend = hdov::dov::CpuBackend::new(&scene, RESOLUTION).unwrap();
-    let grid = scene.grid.unwrap();
+    let grid = scene.grid.clone().unwrap();
     let dov = precompute_shard(
         &mut backend,
         &grid,

@@ -345,7 +345,7 @@ fn sixteen_threads_agree_with_one() {
 fn a_viewpoint_on_a_cell_border_belongs_to_the_upper_cell() {
     let tmp = tempfile::tempdir().unwrap();
     let db = city(&tmp.path().join("db"));
-    let g = *db.grid().unwrap();
+    let g = db.grid().cloned().unwrap();
     let border = g.cell_box([1, 0, 2]).min + Vec3::new(0.0, 0.25, 0.0); // the corner of cells 0..1 × 1..2
     let a = db.query(border, &q(Mode::Threshold, 1e-3)).unwrap();
     assert_eq!(a.cell, [1, 0, 2]);

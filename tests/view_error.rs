@@ -26,7 +26,7 @@ fn open_square() -> hdov::Scene {
 #[test]
 fn nothing_can_hide_so_nothing_is_wrong() {
     let scene = open_square();
-    let grid = scene.grid.unwrap();
+    let grid = scene.grid.clone().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let visibility = hdov::VisibilityParams { resolution: 32, backend: BackendKind::Cpu, ..Default::default() };
     let params = BuildParams { visibility: Some(visibility), ..Default::default() };
@@ -120,7 +120,7 @@ fn region_rays_never_do_worse_than_corners_and_find_what_gaps_show() {
     for (name, (mut scene, grid), factor) in
         [("street", hdov_testkit::scenes::street_with_gaps(), 100.0), ("fence", fence, 4.0)]
     {
-        scene.grid = Some(grid);
+        scene.grid = Some(grid.clone());
         let (_c, corners) = built(&scene, "corners");
         let (_r, region) = built(&scene, "probe:32:4:32768");
         let naive = QueryParams { mode: Mode::Naive, ..Default::default() };

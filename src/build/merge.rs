@@ -39,7 +39,7 @@ impl ShardDir {
     fn open(path: &Path) -> Result<ShardDir> {
         let manifest = Manifest::read(path)?;
         let (Some(params), Some(info), Some(grid)) =
-            (manifest.build.visibility.clone(), manifest.visibility.clone(), manifest.grid)
+            (manifest.build.visibility.clone(), manifest.visibility.clone(), manifest.grid.clone())
         else {
             return Err(Error::bad_file(path, "holds no visibility"));
         };
@@ -75,7 +75,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
     let base_db = Database::open(base)?;
     let files = FileChecksum::of_scene_files(base)?;
     let base_manifest = base_db.manifest();
-    let grid = base_manifest.grid.ok_or_else(|| Error::bad_file(base, "holds no viewing grid"))?;
+    let grid = base_manifest.grid.clone().ok_or_else(|| Error::bad_file(base, "holds no viewing grid"))?;
     let first_path = shards.first().ok_or_else(|| Error::bad_param(Param::Shards, "no shards given"))?;
     let dirs = shards.iter().map(|p| ShardDir::open(p)).collect::<Result<Vec<_>>>()?;
     let first = &dirs[0];

@@ -1,16 +1,17 @@
 //! One function per subcommand: parse, call the library, report.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
 use serde_json::json;
 
-use super::args::{parse_dims, parse_region};
 use hdov::city::{CityParams, CityScale};
+use hdov::text::{parse_box, parse_dims, parse_eye_heights};
 use hdov::{
-    Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, FloorTest, Info, InternalLods, LayoutKind,
-    LodParams, Manifest, ObjectParts, Overwrite, Param, Progress, Result, Sampling, Scene, Shard, TreeAlgorithm,
-    ViewGrid, VisibilityParams,
+    Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, EyeHeights, FloorTest, Info, InternalLods,
+    LayoutKind, LodParams, Manifest, ObjectParts, Overwrite, Param, Progress, Result, Sampling, Scene, Shard,
+    TreeAlgorithm, VisibilityParams,
 };
 
 #[derive(Args)]
@@ -60,15 +61,21 @@ pub struct BuildArgs {
     /// The database directory to create.
     #[arg(long)]
     out: PathBuf,
-    /// Viewing region X0,Y0,Z0,X1,Y1,Z1 (default: the scene's grid, or its footprint at eye height).
-    #[arg(long, value_parser = parse_region, allow_hyphen_values = true)]
+    /// Viewing region X0,Y0,Z0,X1,Y1,Z1, a box of cells (default: the scene's grid if it brings
+    /// one, else cells only where a viewer can stand: eye height above a floor, every storey).
+    #[arg(long, value_parser = parse_box, allow_hyphen_values = true)]
     region: Option<Aabb>,
     /// Cells along x, y (height layers) and z, e.g. 16x1x16.
     #[arg(long, value_parser = parse_dims::<3>, conflicts_with = "cell_size")]
     grid: Option<[u32; 3]>,
-    /// Cell edge length along x and z (one height layer).
+    /// Cell edge length along x and z (default: a sixteenth of the scene's longer side); cells
+    /// where a viewer can stand are at most the lowest eye height tall, a --region's one layer.
     #[arg(long, allow_negative_numbers = true)]
     cell_size: Option<f32>,
+    /// LOW,HIGH: the eye heights above a floor, in scene units, where cells are made when
+    /// neither --region nor --grid is given and the scene brings no grid.
+    #[arg(long, value_parser = parse_eye_heights, default_value = "1,2")]
+    eye_heights: EyeHeights,
     /// Bytes per tree node page and V-page layout page.
     #[arg(long, default_value_t = 4096)]
     page_size: u32,
@@ -191,7 +198,7 @@ pub struct MergeArgs {
 pub struct DovArgs {
     scene: PathBuf,
     /// The viewpoint X,Y,Z.
-    #[arg(long, value_parser = super::args::parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = hdov::text::parse_point, allow_hyphen_values = true)]
     at: glam::Vec3,
     #[arg(long, default_value_t = 256)]
     resolution: u32,
@@ -204,6 +211,10 @@ pub struct DovArgs {
 #[derive(Args)]
 pub struct InfoArgs {
     db: PathBuf,
+    /// List the view cells instead: id, lattice coordinates and box, one line each (JSON lines
+    /// with --json).
+    #[arg(long)]
+    cells: bool,
     #[arg(long)]
     json: bool,
 }
@@ -276,7 +287,7 @@ pub fn build(a: BuildArgs) -> Result<()> {
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    scene.grid = Some(ViewGrid::resolve(scene.bounds(), scene.grid, a.region, a.grid, a.cell_size)?);
+    scene.grid = Some(scene.view_grid(a.region, a.grid, a.cell_size, a.eye_heights)?);
     let progress = Progress::for_terminal(a.json);
     let report = match &a.visibility.base {
         Some(base) => hdov::build_shard_on(&scene, base, &a.out, &params, overwrite(a.force), &progress)?,
@@ -324,14 +335,15 @@ fn report_cleaned(report: &BuildReport) {
 }
 
 fn print_visibility(m: &Manifest) {
-    let (Some(v), Some(g), Some(p)) = (&m.visibility, m.grid, m.build.visibility.as_ref()) else {
+    let (Some(v), Some(g), Some(p)) = (&m.visibility, &m.grid, m.build.visibility.as_ref()) else {
         println!("  visibility: none");
         return;
     };
+    let where_ = if g.present.is_some() { " where a viewer can stand" } else { "" };
     println!(
-        "  visibility: {} of {} cells ({}x{}x{}), {} sample points at R = {}, {:.1} s, backend {}",
+        "  visibility: {} of {} cells{where_} (lattice {}x{}x{}), {} sample points at R = {}, {:.1} s, backend {}",
         v.cells_computed,
-        g.cell_count(),
+        g.present_count(),
         g.dims[0],
         g.dims[1],
         g.dims[2],
@@ -347,12 +359,34 @@ fn print_visibility(m: &Manifest) {
 
 pub fn info(a: InfoArgs) -> Result<()> {
     let db = Database::open(&a.db)?;
+    if a.cells {
+        return print_cells(&db, a.json);
+    }
     let info = db.info()?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&info).expect("serialisable"));
         return Ok(());
     }
     print_info(&a.db, &info, db.manifest());
+    Ok(())
+}
+
+/// `hdov info --cells`: every view cell, ascending ids.
+fn print_cells(db: &Database, json: bool) -> Result<()> {
+    let grid = db.grid().ok_or_else(|| Error::bad_file(db.dir(), "holds no viewing grid"))?;
+    let mut out = std::io::stdout().lock();
+    for id in grid.present_ids() {
+        let cell = grid.cell_coords(id);
+        let b = grid.cell_box(cell);
+        let line = if json {
+            serde_json::json!({ "id": id, "cell": cell, "min": b.min.to_array(), "max": b.max.to_array() }).to_string()
+        } else {
+            format!("{id} {cell:?} {:?} {:?}", b.min.to_array(), b.max.to_array())
+        };
+        if writeln!(out, "{line}").is_err() {
+            break;
+        }
+    }
     Ok(())
 }
 
@@ -380,7 +414,14 @@ fn print_info(path: &Path, info: &Info, m: &Manifest) {
     );
     if let Some(g) = &info.grid {
         let [nx, ny, nz] = g.dims;
-        println!("  grid {nx}x{ny}x{nz} = {} cells over {:?}", info.cells, g.region);
+        if g.sparse {
+            println!(
+                "  view cells {} where a viewer can stand, in a {nx}x{ny}x{nz} lattice over {:?}",
+                info.cells, g.region
+            );
+        } else {
+            println!("  grid {nx}x{ny}x{nz} = {} cells over {:?}", info.cells, g.region);
+        }
     }
     for f in &info.files {
         println!("  {:<16} {:>12} bytes", f.name, f.bytes);
@@ -439,7 +480,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         ..Default::default()
     };
     if !a.json {
-        let g = scene.grid.expect("the city brings its grid");
+        let g = scene.grid.as_ref().expect("the city brings its grid");
         println!(
             "demo: default city ({} objects), grid {}x{}x{} = {} cells, DoV at R = {DEMO_RESOLUTION}",
             scene.objects.len(),

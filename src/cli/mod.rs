@@ -2,7 +2,6 @@
 //! function and prints a summary, or one JSON document with `--json`. Errors print one line,
 //! `error: <file or argument>: <reason>`, and exit with status 2.
 
-mod args;
 mod commands;
 mod query;
 mod render;
@@ -122,6 +121,7 @@ fn flag_of(param: Param) -> &'static str {
         Param::CellSize => "--cell-size",
         Param::DovCodec => "--dov-codec",
         Param::Eta => "--eta",
+        Param::EyeHeights => "--eye-heights",
         Param::Eyesight => "--eyesight",
         Param::Fanout => "--fanout",
         Param::Fidelity => "--fidelity",

@@ -6,10 +6,10 @@ use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
 
-use super::args::{parse_dims, parse_vec3};
 use hdov::city::WalkKind;
 use hdov::render::{View, fidelity};
 use hdov::review::{self, ReviewParams};
+use hdov::text::{parse_dims, parse_point};
 use hdov::{Answer, Database, QueryParams, SessionParams, Step};
 use hdov::{Camera, Error, LodRule, Mode, Param, Result};
 use hdov::{LayoutKind, PolicyKind};
@@ -60,7 +60,7 @@ pub struct QueryArgs {
     #[arg(long)]
     layout: Option<LayoutKind>,
     /// View direction DX,DY,DZ: cull the answer to the view frustum (what is drawn this frame).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     look: Option<Vec3>,
     /// Field of view in degrees: vertical, with --look (default 60; vmsse without --look
     /// assumes 60); `walk --method review`: horizontal and vertical (default 45).
@@ -83,7 +83,7 @@ impl QueryArgs {
 pub struct QueryCmd {
     db: PathBuf,
     /// The viewpoint X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     at: Vec3,
     #[command(flatten)]
     query: QueryArgs,
@@ -370,8 +370,8 @@ pub(super) fn summarise(steps: &[Step]) -> WalkSummary {
 /// The demo's queries from one street viewpoint and its walk; returns them as JSON, and the
 /// viewpoint with the walk's direction there.
 pub(super) fn demo_queries(db: &Database, json: bool) -> Result<(serde_json::Value, serde_json::Value, (Vec3, Vec3))> {
-    let grid = *db.grid().ok_or_else(|| Error::bad_file(db.dir(), "holds no grid"))?;
-    let path = hdov::city::avenue_walk(&grid, 150);
+    let grid = db.grid().ok_or_else(|| Error::bad_file(db.dir(), "holds no grid"))?;
+    let path = hdov::city::avenue_walk(grid, 150);
     let (at, along) = path[path.len() / 3];
     let ahead = Camera { look: Vec3::X, ..Camera::default() };
     let asks = [

@@ -7,20 +7,20 @@ use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
 
-use super::args::{parse_dims, parse_vec3};
 use hdov::Database;
 use hdov::Result;
 use hdov::render::fidelity::{self, Fidelity};
 use hdov::render::{ColorMode, Renderer, View};
+use hdov::text::{parse_dims, parse_point};
 
 #[derive(Args)]
 pub struct RenderCmd {
     db: PathBuf,
     /// The viewpoint X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     at: Vec3,
     /// View direction DX,DY,DZ (y up).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     look: Vec3,
     #[command(flatten)]
     answer: super::query::AnswerArgs,

@@ -23,13 +23,12 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use clap::Args;
-use glam::Vec3;
 use serde::Serialize;
 use serde_json::json;
 
-use super::args::parse_vec3;
 use hdov::city::WalkKind;
-use hdov::{Camera, Database, Error, Item, LayoutKind, LodRef, LodRule, Mode, Param, QueryParams};
+use hdov::text::{QUERY_KEYS, UrlQuery, WALK_KEYS, quoted, url_key};
+use hdov::{Database, Error, Item, LodRef, Mode};
 
 /// Longest request target (path and query) served; a query needs under 200 bytes.
 const MAX_TARGET: usize = 2048;
@@ -193,17 +192,14 @@ impl IntoResponse for Reply {
 /// it); anything else is the database's, a 500.
 fn reply(e: Error) -> Reply {
     match e {
-        Error::BadParam { param, reason } => Reply::Bad(format!("{}: {reason}", key_of(param))),
+        Error::BadParam { param, reason } => Reply::Bad(format!("{}: {reason}", url_key(param))),
         e => Reply::Status(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }
 
-/// The query key that sets a library parameter.
-fn key_of(param: Param) -> &'static str {
-    match param {
-        Param::Camera => "look",
-        p => p.name(),
-    }
+/// The request's query string as the route's `known` keys.
+fn url_query(raw: Option<String>, known: &[&str]) -> Result<UrlQuery, Reply> {
+    UrlQuery::parse(raw.as_deref().unwrap_or(""), known).map_err(Reply::Bad)
 }
 
 /// Runs the database work of a request off the async threads.
@@ -216,62 +212,14 @@ async fn blocking<T: Send + 'static>(
         .unwrap_or_else(|e| Err(Reply::Status(StatusCode::INTERNAL_SERVER_ERROR, format!("request failed: {e}"))))
 }
 
-/// `key=value` pairs of a query string, each key at most once and one of `known`.
-fn pairs(raw: Option<String>, known: &[&str]) -> Result<HashMap<String, String>, Reply> {
-    let list: Vec<(String, String)> = serde_urlencoded::from_str(raw.as_deref().unwrap_or(""))
-        .map_err(|e| Reply::Bad(format!("malformed query string: {e}")))?;
-    let mut out = HashMap::new();
-    for (k, v) in list {
-        if !known.contains(&k.as_str()) {
-            return Err(Reply::Bad(format!("unknown parameter '{k}' ({})", known.join(", "))));
-        }
-        if out.insert(k.clone(), v).is_some() {
-            return Err(Reply::Bad(format!("parameter '{k}' given twice")));
-        }
-    }
-    Ok(out)
-}
-
-/// The value of `key` parsed by `parse`, its error prefixed by the key.
-fn value<T>(
-    p: &HashMap<String, String>,
-    key: &str,
-    parse: impl FnOnce(&str) -> Result<T, String>,
-) -> Result<Option<T>, Reply> {
-    p.get(key).map(|v| parse(v).map_err(|r| Reply::Bad(format!("{key}: {r}")))).transpose()
-}
-
-fn number<T: std::str::FromStr>(what: &'static str) -> impl Fn(&str) -> Result<T, String> {
-    move |s| s.parse::<T>().map_err(|_| format!("'{s}' is not {what}"))
-}
-
 async fn info(State(s): State<Arc<Served>>) -> Result<Response, Reply> {
     blocking(s, |s| Ok(json_response(&s.db.info().map_err(reply)?))).await
 }
 
-const QUERY_KEYS: &[&str] = &["at", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
-
-/// The query a request asks, from its `look`, `fov`, `eta`, `mode`, `lod_rule`, `layout`,
-/// `budget` and `tau` (each as the command line parses it).
-fn query_params(p: &HashMap<String, String>) -> Result<QueryParams, Reply> {
-    let look = value(p, "look", parse_vec3)?;
-    let fov = value(p, "fov", number::<f32>("a number of degrees"))?;
-    let defaults = QueryParams::default();
-    Ok(QueryParams {
-        mode: value(p, "mode", str::parse::<Mode>)?.unwrap_or(defaults.mode),
-        eta: value(p, "eta", number::<f64>("a number"))?.unwrap_or(defaults.eta),
-        budget: value(p, "budget", number::<u64>("a count of faces"))?.unwrap_or(defaults.budget),
-        tau: value(p, "tau", number::<f64>("a number of pixels"))?.unwrap_or(defaults.tau),
-        lod_rule: value(p, "lod_rule", str::parse::<LodRule>)?.unwrap_or(defaults.lod_rule),
-        layout: value(p, "layout", |s| s.parse::<LayoutKind>().map_err(|e| e.to_string()))?,
-        camera: look.map(|look| Camera { look, fov_y_deg: fov.unwrap_or(60.0), ..Camera::default() }),
-    })
-}
-
 async fn query(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
-    let p = pairs(raw, QUERY_KEYS)?;
-    let at = value(&p, "at", parse_vec3)?.ok_or_else(|| Reply::Bad("at: missing (at=X,Y,Z)".into()))?;
-    let params = query_params(&p)?;
+    let q = url_query(raw, QUERY_KEYS)?;
+    let at = q.point("at").map_err(Reply::Bad)?;
+    let params = q.query_params().map_err(Reply::Bad)?;
     blocking(s, move |s| {
         let answer = s.db.query(at, &params).map_err(reply)?;
         let served = ServedAnswer {
@@ -339,8 +287,8 @@ fn json_response(value: &impl Serialize) -> Response {
 }
 
 async fn scene(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
-    let p = pairs(raw, &["lod"])?;
-    let lod = value(&p, "lod", number::<u32>("a level"))?.unwrap_or(0);
+    let q = url_query(raw, &["lod"])?;
+    let lod = q.number::<u32>("lod", "a level").map_err(Reply::Bad)?.unwrap_or(0);
     blocking(s, move |s| {
         let items = hdov::scene_items(&s.db, lod).map_err(reply)?;
         let items: Vec<ServedItem> = items.iter().map(|i| ServedItem::of(s, i)).collect();
@@ -375,19 +323,17 @@ struct RecordedStep {
 }
 
 async fn recorded_walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
-    let p = pairs(raw, &["kind", "steps"])?;
-    let kind = value(&p, "kind", str::parse::<WalkKind>)?.unwrap_or(WalkKind::Turning);
-    let steps = value(&p, "steps", number::<u32>("a count"))?.unwrap_or(300);
+    let q = url_query(raw, &["kind", "steps"])?;
+    let kind = q.value("kind", str::parse::<WalkKind>).map_err(Reply::Bad)?.unwrap_or(WalkKind::Turning);
+    let steps = q.number::<u32>("steps", "a count").map_err(Reply::Bad)?.unwrap_or(300);
     if !(1..=MAX_WALK_STEPS).contains(&steps) {
         return Err(Reply::Bad(format!("steps: {steps} is outside 1..={MAX_WALK_STEPS}")));
     }
-    let grid = *s.db.grid().expect("checked at start");
-    let path = hdov::city::walk(&grid, kind, steps as usize);
+    let grid = s.db.grid().expect("checked at start");
+    let path = hdov::city::walk(grid, kind, steps as usize);
     let steps = path.iter().map(|(at, look)| RecordedStep { at: at.to_array(), look: look.to_array() }).collect();
     Ok(json_response(&RecordedWalk { kind: kind.name(), steps }))
 }
-
-const WALK_KEYS: &[&str] = &["path", "look", "fov", "eta", "mode", "lod_rule", "layout", "budget", "tau"];
 
 /// One step of a walk as a client needs it: what to load and what to drop since the last step.
 #[derive(Serialize)]
@@ -402,14 +348,9 @@ struct ServedStep<'a> {
 /// `Session`, its page cache and delta loading), answered step by step with the items to load
 /// and the (kind, id, level) keys to drop, so that a client holds exactly the last answer.
 async fn walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<Response, Reply> {
-    let p = pairs(raw, WALK_KEYS)?;
-    let path = p.get("path").ok_or_else(|| Reply::Bad("path: missing (path=X,Y,Z;X,Y,Z;…)".into()))?;
-    let points: Vec<Vec3> = path
-        .split(';')
-        .enumerate()
-        .map(|(k, v)| parse_vec3(v).map_err(|r| Reply::Bad(format!("path: step {k}: {r}"))))
-        .collect::<Result<_, _>>()?;
-    let params = hdov::SessionParams { query: query_params(&p)?, ..Default::default() };
+    let q = url_query(raw, WALK_KEYS)?;
+    let points = q.path().map_err(Reply::Bad)?;
+    let params = hdov::SessionParams { query: q.query_params().map_err(Reply::Bad)?, ..Default::default() };
     blocking(s, move |s| {
         let mut session = s.db.session(&params).map_err(reply)?;
         let mut held: std::collections::HashSet<(hdov::ItemKind, u32, u32)> = Default::default();
@@ -434,7 +375,7 @@ async fn walk(State(s): State<Arc<Served>>, RawQuery(raw): RawQuery) -> Result<R
 }
 
 async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: HeaderMap) -> Result<Response, Reply> {
-    let unknown = || Reply::NotFound(format!("no stored LOD '{name}' (mesh URLs come from /query)"));
+    let unknown = || Reply::NotFound(format!("no stored LOD {} (mesh URLs come from /query)", quoted(&name)));
     // `{offset}-{crc}.glb`, byte for byte the URL /query writes for that level.
     let offset: u64 = name.split_once('-').and_then(|(o, _)| o.parse().ok()).ok_or_else(unknown)?;
     let served = s.lods.get(&offset).filter(|l| l.url.strip_prefix("/mesh/") == Some(&name)).ok_or_else(unknown)?;

@@ -29,7 +29,8 @@ pub struct Info {
     pub base_meshes: u64,
     /// Nodes of the R-tree.
     pub nodes: u64,
-    /// Viewing cells of the grid (0 without one).
+    /// View cells (0 without a grid): every cell of a regular grid, the places a viewer can
+    /// stand of one found from the geometry.
     pub cells: u64,
     /// Faces over all stored LOD levels (leaf and internal).
     pub lod_triangles: u64,
@@ -60,6 +61,8 @@ pub struct GridInfo {
     pub region: [f32; 6],
     /// Cells along x, y (height layers) and z.
     pub dims: [u32; 3],
+    /// Whether only some of the cells are view cells (`hdov info --cells` lists them).
+    pub sparse: bool,
 }
 
 /// What one layout costs on disk and per cell flip.
@@ -115,11 +118,11 @@ impl Database {
             stored_triangles: c.stored_triangles,
             base_meshes: c.base_meshes,
             nodes: c.nodes,
-            cells: c.cells,
+            cells: m.grid.as_ref().map_or(0, |g| g.present_count() as u64),
             lod_triangles: c.lod_triangles,
             leaf_lod_bytes: self.catalog().mesh_lods.iter().flatten().map(|l| u64::from(l.len)).sum(),
             internal_lod_bytes: self.catalog().node_lods.iter().flatten().map(|l| u64::from(l.len)).sum(),
-            grid: m.grid.map(|g| GridInfo { region: g.region.to_array(), dims: g.dims }),
+            grid: m.grid.as_ref().map(|g| GridInfo { region: g.region.to_array(), dims: g.dims, sparse: g.present.is_some() }),
             resolution: m.build.visibility.as_ref().map(|v| v.resolution),
             tree: m.tree.clone(),
             build: m.build.clone(),

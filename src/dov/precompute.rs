@@ -195,13 +195,13 @@ pub fn precompute_shard(
     if shard.count == 0 || shard.index >= shard.count {
         return Err(Error::bad_param(Param::Shard, format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
-    let cells = shard.cells(grid);
+    let cells: Vec<usize> = shard.cells(grid).filter(|&id| grid.is_present(id)).collect();
     let mut samplers: Vec<Box<dyn CellSampler>> = options.samplers.iter().map(Sampling::sampler).collect();
     let ring = samplers.iter().map(|s| s.corner_ring()).chain([u32::from(options.uses_neighbours())]).max().unwrap_or(0);
-    let corners_of = |coords: [u32; 3]| grid.neighbourhood_corners(coords, ring);
+    let corners_of = |coords: [u32; 3]| grid.neighbourhood_view_corners(coords, ring);
     // How many shard cells still need each corner: drop a corner's DoV after its last cell.
     let mut corner_uses: HashMap<usize, u32> = HashMap::new();
-    for id in cells.clone() {
+    for &id in &cells {
         for c in corners_of(grid.cell_coords(id)) {
             *corner_uses.entry(c).or_insert(0) += 1;
         }
@@ -209,7 +209,7 @@ pub fn precompute_shard(
     let per_cell: u32 = samplers.iter().map(|s| s.planned_points()).sum();
     let mut tally = Tally::new(corner_uses.len() + cells.len() * per_cell as usize, progress);
     for sampler in &mut samplers {
-        sampler.prepare(backend, grid, cells.clone(), &mut tally)?;
+        sampler.prepare(backend, grid, &cells, &mut tally)?;
     }
     let mut corner_dov: HashMap<usize, PointDov> = HashMap::new();
     let cube = backend.cube_map().clone();
@@ -257,7 +257,7 @@ pub fn precompute_shard(
             })
             .collect();
         let around: Vec<&PointDov> = if ring > 0 {
-            grid.neighbourhood_corners(coords, 1)
+            grid.neighbourhood_view_corners(coords, 1)
                 .into_iter()
                 .filter(|c| !own.contains(c))
                 .map(|c| &corner_dov[&c])

@@ -184,7 +184,7 @@ impl Manifest {
         if let Some(g) = &self.grid {
             crate::format::params::check_grid(g, 0).map_err(|e| e.to_string())?;
         }
-        match self.grid {
+        match &self.grid {
             Some(g) if g.cell_count() as u64 != c.cells => {
                 return Err(format!("grid has {} cells, counts say {}", g.cell_count(), c.cells));
             }

@@ -23,8 +23,9 @@ pub use manifest::{Counts, FileChecksum, FileEntry, LayoutInfo, Manifest, Visibi
 
 /// 2: the catalog holds node shapes (the stop rule's inputs). 3: internal LODs by geometric
 /// error, and the catalog's error ladder and descent faces. 4: objects may be parts of the
-/// file's objects (the catalog's `part`).
-pub const FORMAT_VERSION: u32 = 4;
+/// file's objects (the catalog's `part`). 5: a grid may hold view cells only where a viewer can
+/// stand (the manifest grid's `present` runs), and shards split the view cells, not the lattice.
+pub const FORMAT_VERSION: u32 = 5;
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const TREE_FILE: &str = "tree.pages";
 pub const GEOMETRY_FILE: &str = "geometry.blob";

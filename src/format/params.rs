@@ -92,12 +92,22 @@ impl Shard {
         Ok(Shard { index, count })
     }
 
-    /// The cell ids of this shard.
+    /// The cell ids of this shard: a range of ids holding its share of the view cells (the
+    /// shards' ranges tile the lattice, so that a merge appends them in order).
     pub fn cells(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
-        let c = grid.cell_count() as u64;
-        let lo = c * self.index as u64 / self.count as u64;
-        let hi = c * (self.index as u64 + 1) / self.count as u64;
-        lo as usize..hi as usize
+        let n = grid.present_count() as u64;
+        // Where shard k starts: at its first view cell, the first shard at 0, past the last at
+        // the lattice's end.
+        let start = |k: u32| -> usize {
+            let p = n * u64::from(k) / u64::from(self.count);
+            match k {
+                0 => 0,
+                _ if p >= n => grid.cell_count(),
+                _ => grid.present_ids().nth(p as usize).expect("p < the view cells"),
+            }
+        };
+        let end = if self.index + 1 == self.count { grid.cell_count() } else { start(self.index + 1) };
+        start(self.index)..end
     }
 }
 

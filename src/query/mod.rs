@@ -33,6 +33,7 @@ use crate::format::by_name::serde_by_name;
 use crate::format::catalog::LodRef;
 use crate::geom::Aabb;
 use hdov_storage::LayoutKind;
+use hdov_storage::names::quoted;
 pub(crate) use session::CellMethod;
 pub use session::{Session, SessionParams, Step};
 
@@ -119,13 +120,13 @@ impl fmt::Display for LodRule {
 impl FromStr for LodRule {
     type Err = String;
     fn from_str(s: &str) -> std::result::Result<LodRule, String> {
-        let bad = || format!("unknown LOD rule '{s}' (dov, screen or screen:PIXELS)");
+        let bad = || format!("unknown LOD rule {} (dov, screen or screen:PIXELS)", quoted(s));
         match s.split_once(':') {
             None if s == "dov" => Ok(LodRule::Dov),
             None if s == "screen" => Ok(LodRule::default()),
             Some(("screen", px)) => match px.parse::<f64>() {
                 Ok(pixels) if pixels.is_finite() && pixels >= 0.0 => Ok(LodRule::ScreenError { pixels }),
-                _ => Err(format!("LOD rule '{s}': pixels must be a number ≥ 0")),
+                _ => Err(format!("LOD rule {}: pixels must be a number ≥ 0", quoted(s))),
             },
             _ => Err(bad()),
         }
@@ -366,7 +367,8 @@ impl Database {
         }
     }
 
-    /// The cell holding `at` (points on an inner cell border belong to the upper cell).
+    /// The view cell holding `at` (points on an inner cell border belong to the upper cell);
+    /// refused outside the grid and in a cell that is not a view cell.
     pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
         let grid =
             self.grid().ok_or_else(|| Error::bad_param(Param::At, format!("{} holds no grid", self.dir().display())))?;
@@ -376,7 +378,15 @@ impl Database {
         let cell = grid.cell_of(at).ok_or_else(|| {
             Error::bad_param(Param::At, format!("{:?} lies outside the grid {:?}", at.to_array(), grid.region.to_array()))
         })?;
-        Ok((cell, grid.cell_id(cell) as u32))
+        let id = grid.cell_id(cell);
+        if !grid.is_present(id) {
+            let reason = format!(
+                "{:?} is in no view cell: this database has cells only where a viewer can stand (eye height above a floor, in empty space), and cell {cell:?} is not one",
+                at.to_array()
+            );
+            return Err(Error::bad_param(Param::At, reason));
+        }
+        Ok((cell, id as u32))
     }
 
     /// Checks the query's parameters; returns its warnings.

@@ -113,7 +113,7 @@ pub fn write(scene: &Scene, path: &Path, overwrite: Overwrite) -> Result<()> {
             .iter()
             .map(|o| ObjectEntry { name: o.name.clone(), mesh: o.mesh, transform: o.transform.to_cols_array() })
             .collect(),
-        grid: scene.grid,
+        grid: scene.grid.clone(),
     };
     claim(path, overwrite, is_scene_manifest(path))?;
     claim(&meshes_path, overwrite, BlobFile::open(&meshes_path, MESHES_KIND).is_ok())?;

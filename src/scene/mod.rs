@@ -8,6 +8,7 @@ pub mod gltf;
 pub mod manifest;
 pub mod obj;
 pub mod parts;
+pub mod standable;
 
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
@@ -240,6 +241,13 @@ impl Scene {
     pub fn object_triangles(&self, object: usize) -> impl Iterator<Item = [Vec3; 3]> + '_ {
         let m = self.objects[object].transform;
         self.object_mesh(object).triangles().map(move |t| t.map(|p| m.transform_point3(p)))
+    }
+
+    /// [`Scene::object_triangles`] wound counter-clockwise seen from outside: a mirroring
+    /// transform (negative determinant) has its winding flipped back.
+    pub fn object_faces(&self, object: usize) -> impl Iterator<Item = [Vec3; 3]> + '_ {
+        let mirrored = self.objects[object].transform.determinant() < 0.0;
+        self.object_triangles(object).map(move |t| if mirrored { [t[0], t[2], t[1]] } else { t })
     }
 
     /// Faces of every instance at full detail (instances counted each time).

@@ -33,7 +33,7 @@ pub fn split_large_objects(scene: &Scene, part_extent: f32) -> Scene {
         let s = &mut scale[o.mesh as usize];
         *s = s.max(max_scale(&o.transform));
     }
-    let mut out = Scene { meshes: Vec::new(), objects: Vec::new(), grid: scene.grid };
+    let mut out = Scene { meshes: Vec::new(), objects: Vec::new(), grid: scene.grid.clone() };
     // The meshes each base mesh became in `out`.
     let mut became: Vec<Vec<u32>> = Vec::with_capacity(scene.meshes.len());
     for (m, base) in scene.meshes.iter().enumerate() {

@@ -23,7 +23,18 @@ pub fn parse_name<T: Named>(s: &str) -> Result<T, String> {
         .iter()
         .copied()
         .find(|v| v.name() == s)
-        .ok_or_else(|| format!("unknown {} '{s}' (expected {})", T::WHAT, names::<T>()))
+        .ok_or_else(|| format!("unknown {} {} (expected {})", T::WHAT, quoted(s), names::<T>()))
+}
+
+/// Text a user gave, quoted for a one-line message: `'…'`, control characters escaped and
+/// anything past 60 characters left out (a URL may carry kilobytes of it).
+pub fn quoted(s: &str) -> String {
+    const SHOWN: usize = 60;
+    let mut out: String = s.chars().take(SHOWN).flat_map(char::escape_debug).collect();
+    if s.chars().nth(SHOWN).is_some() {
+        out.push('…');
+    }
+    format!("'{out}'")
 }
 
 /// Every name of `T`, as a list for messages: `a, b or c`.

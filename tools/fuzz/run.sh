@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs every fuzz target of hdov (tools/fuzz: scene files and database files) and of its storage
+# Runs every fuzz target of hdov (tools/fuzz: scene files, database files, URL queries) and of its storage
 # crate (storage/fuzz: page files, blobs, layouts) for SECONDS each (default 30) with libFuzzer,
 # coverage-guided, on stable Rust: `cargo fuzz --sanitizer none` passes only stable flags (no
 # AddressSanitizer: panics, overflows, timeouts and memory blow-ups are what it finds).
@@ -35,4 +35,4 @@ run() {
   echo "fuzz: $target ran $what without a failure"
 }
 for t in pagefile blob layout; do run storage "$t"; done
-for t in tree_node catalog database scene_gltf scene_obj scene_manifest; do run tools "$t"; done
+for t in tree_node catalog database scene_gltf scene_obj scene_manifest url_query; do run tools "$t"; done

@@ -24,6 +24,7 @@ pub fn machine() -> String {
 pub const HIERARCHY_ETAS: [f64; 6] = [0.0, 1e-4, 1e-3, 4e-3, 1e-2, 3e-2];
 
 pub mod args;
+pub mod corpus;
 pub mod experiments;
 pub mod walk_loads;
 /// CPU time this process has used (all its threads), to the nanosecond: on a machine shared with

@@ -208,10 +208,9 @@ pub fn world_triangles(scene: &Scene) -> Result<(Vec<[Vec3; 3]>, Vec<u32>)> {
     check_object_count(scene)?;
     let mut triangles = Vec::with_capacity(scene.triangle_count() as usize);
     let mut objects = Vec::with_capacity(triangles.capacity());
-    for (i, o) in scene.objects.iter().enumerate() {
-        let mirrored = o.transform.determinant() < 0.0;
-        for t in scene.object_triangles(i) {
-            triangles.push(if mirrored { [t[0], t[2], t[1]] } else { t });
+    for i in 0..scene.objects.len() {
+        for t in scene.object_faces(i) {
+            triangles.push(t);
             objects.push(i as u32);
         }
     }

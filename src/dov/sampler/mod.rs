@@ -92,9 +92,9 @@ pub trait CellSampler {
         0
     }
 
-    /// Work done once for a shard before its cells (`cells`, ascending ids), such as region rays
-    /// over them and their neighbours. Refuses a backend that lacks what the sampler needs.
-    fn prepare(&mut self, _backend: &mut dyn DovBackend, _grid: &ViewGrid, _cells: std::ops::Range<usize>, _tally: &mut Tally) -> Result<()> {
+    /// Work done once for a shard before its view cells (`cells`, ascending ids), such as region
+    /// rays over them and their neighbours. Refuses a backend that lacks what the sampler needs.
+    fn prepare(&mut self, _backend: &mut dyn DovBackend, _grid: &ViewGrid, _cells: &[usize], _tally: &mut Tally) -> Result<()> {
         Ok(())
     }
 

@@ -25,7 +25,7 @@
 //! the neighbouring cells' region rays meet becomes a candidate here (`precompute`).
 
 use std::collections::{HashMap, HashSet};
-use std::ops::Range;
+
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -472,7 +472,7 @@ impl CellSampler for Probe {
         true
     }
 
-    fn prepare(&mut self, backend: &mut dyn DovBackend, grid: &ViewGrid, cells: Range<usize>, tally: &mut Tally) -> Result<()> {
+    fn prepare(&mut self, backend: &mut dyn DovBackend, grid: &ViewGrid, cells: &[usize], tally: &mut Tally) -> Result<()> {
         let Some(caster) = backend.ray_caster() else {
             return Err(Error::bad_param(
                 Param::Samples,
@@ -482,7 +482,13 @@ impl CellSampler for Probe {
         if self.probing.region == 0 {
             return Ok(());
         }
-        let mut ids: Vec<usize> = cells.flat_map(|id| grid.neighbourhood_cells(grid.cell_coords(id), REGION_RING)).collect();
+        // The neighbours that are view cells: rays from inside a solid would find what no viewer
+        // sees.
+        let mut ids: Vec<usize> = cells
+            .iter()
+            .flat_map(|&id| grid.neighbourhood_cells(grid.cell_coords(id), REGION_RING))
+            .filter(|&id| grid.is_present(id))
+            .collect();
         ids.sort_unstable();
         ids.dedup();
         let sequence = RegionSequence::new(self.probing.region);

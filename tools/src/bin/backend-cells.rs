@@ -39,7 +39,7 @@ struct Args {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { r, shard } = Args::parse();
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
-    let grid = scene.grid.expect("the city brings a grid");
+    let grid = scene.grid.clone().expect("the city brings a grid");
     let tree = RTree::build(&scene.all_object_bounds(), fanout(4096), TreeAlgorithm::Str);
     let shape =
         TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };

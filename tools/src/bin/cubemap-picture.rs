@@ -34,7 +34,7 @@ struct Args {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { out, r } = Args::parse();
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
-    let grid = scene.grid.expect("the city brings a grid");
+    let grid = scene.grid.clone().expect("the city brings a grid");
     // The grid corner near the city's middle that sees the most objects from the street (not from
     // inside a building), at eye height: found with a coarse cube map.
     let mut probe = CpuBackend::new(&scene, 16)?;

@@ -44,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { points, resolutions } = Args::parse();
     let points = points as usize;
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
-    let grid = scene.grid.expect("the city brings a grid");
+    let grid = scene.grid.clone().expect("the city brings a grid");
     let points_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
     let lod_options =

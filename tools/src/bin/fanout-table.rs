@@ -84,7 +84,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         };
         let info = db.info()?;
-        let grid = *db.grid().ok_or("no grid")?;
+        let grid = db.grid().cloned().ok_or("no grid")?;
         let centres = grid.cell_centres();
         let n = centres.len() as f64;
         // Means of faces, pages, items and internal LODs over the cell centres.

@@ -92,7 +92,7 @@ fn report(name: &str, scene: &Scene, points: usize, r: u32) -> Result<(), Box<dy
     println!("| model space + instances (now) | {} | {} |", mb(full_bytes), mb(indirect.bytes_uploaded()));
     println!("instanced backend with LODs set up in {setup:.1} s on {}", indirect.adapter_name());
 
-    let Some(grid) = scene.grid else { return Ok(()) };
+    let Some(grid) = &scene.grid else { return Ok(()) };
     // Corners spread over the grid: a deterministic stride through the corner ids.
     let stride = (grid.corner_count() / points.max(1)).max(1);
     let at: Vec<_> = (0..points)

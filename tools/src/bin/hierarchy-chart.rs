@@ -57,7 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { db: db_path, out, steps } = Args::parse();
     let steps = steps as usize;
     let db = Database::open(&db_path)?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let renderer = Renderer::new()?;
     let (w, h, fov) = (640, 360, 60.0);
     let camera = View::new(glam::Vec3::ZERO, glam::Vec3::X, fov, w, h).camera();

@@ -48,7 +48,7 @@ struct Args {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { db: db_path, size: [w, h] } = Args::parse();
     let db = Database::open(&db_path)?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let views: Vec<View> = hdov::city::avenue_walk(&grid, 12)
         .into_iter()
         .flat_map(|(at, look)| {

@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for r in [128, 256] {
         let mut full = GpuBackend::new(&scene, r)?;
         println!("R={r} adapter {}", full.adapter_name());
-        let points = open_corners(&scene.grid.expect("a city has a grid"), &mut full, 20)?;
+        let points = open_corners(&scene.grid.clone().expect("a city has a grid"), &mut full, 20)?;
         let floor = full.cube_map().texel_floor();
         let start = full.triangles_drawn();
         let t = Instant::now();

@@ -33,7 +33,7 @@ struct Args {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Args { db: db_path } = Args::parse();
     let db = Database::open(&db_path)?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let continuous = street_walks(&grid);
     // Prefetch: the continuous walks with and without it, DoV-Time cache of 64 pages.
     println!(

@@ -68,7 +68,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("{}", hdov_tools::machine());
 
     let (scene, _) = Scene::load(&scene_path)?;
-    let grid = ViewGrid::resolve(scene.bounds(), scene.grid, None, Some(dims), None)?;
+    let grid = ViewGrid::resolve(scene.bounds(), scene.grid.clone(), None, Some(dims), None)?;
     let points: Vec<Vec3> = (0..grid.corner_count()).map(|i| grid.corner_position(grid.corner_coords(i))).collect();
     let t0 = Instant::now();
     let mut backend = CpuBackend::new(&scene, r)?;

@@ -149,7 +149,7 @@ fn main() {
     let out = args.out.as_ref();
     let check = !args.no_check;
     let db = Database::open(&db_dir).expect("opens");
-    let grid = *db.grid().expect("a grid");
+    let grid = db.grid().cloned().expect("a grid");
     let hdov = args.hdov.unwrap_or_else(|| std::env::current_exe().unwrap().with_file_name("hdov"));
     let mut server = Command::new(&hdov)
         .args(["serve", db_dir.to_str().unwrap(), "--addr", "127.0.0.1:0"])

@@ -145,7 +145,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let truth_r: u32 = args.truth;
     let frames = args.frames;
     let (mut scene, grid) = hdov_testkit::scenes::audit_scene(&scene_name, r)?;
-    scene.grid = Some(grid);
+    scene.grid = Some(grid.clone());
     // The objects the databases hold (large ones cut into parts, `--objects geometry`), whose ids
     // their answers name: the truth is measured on them.
     let built = BuildParams { objects: args.objects, ..Default::default() };

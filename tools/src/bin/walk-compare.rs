@@ -105,7 +105,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let o = options()?;
     let [w, h] = o.size;
     let db = Database::open(&o.db)?;
-    let grid = *db.grid().ok_or("the database holds no viewing grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no viewing grid")?;
     let camera = walkthrough::camera(w, h);
     let fov_y = camera.fov_y_deg;
     let renderer = match Renderer::new() {

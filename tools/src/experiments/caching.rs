@@ -16,7 +16,7 @@ const POLICIES: [PolicyKind; 4] = [PolicyKind::Lru, PolicyKind::Dov, PolicyKind:
 
 pub fn run(ctx: &mut Ctx) -> Result<()> {
     let (_, db) = ctx.main_database()?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let continuous = street_walks(&grid);
     let mut random = grid.cell_centres();
     shuffle(&mut random, 7);

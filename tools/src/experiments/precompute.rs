@@ -23,7 +23,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
     // A smaller city than the scale's: per-point cost grows with R², and R = 1024 is here.
     let city = if small { CityScale::Tiny } else { CityScale::Small };
     let scene = ctx.city(city, None)?;
-    let grid = scene.grid.ok_or("the city brings no grid")?;
+    let grid = scene.grid.clone().ok_or("the city brings no grid")?;
     let bounds = scene.all_object_bounds();
     let corners_per_cell = grid.corner_count() as f64 / grid.cell_count() as f64;
     let k_max = *ks.iter().max().unwrap_or(&0);

@@ -135,7 +135,7 @@ pub fn run_accuracy(ctx: &mut Ctx) -> Result<()> {
         }
     };
     let (_, db) = ctx.main_database()?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let n_views = if ctx.cfg.scale == super::Scale::Small { 4 } else { 12 };
     let views: Vec<View> = hdov::city::avenue_walk(&grid, n_views)
         .into_iter()

@@ -39,7 +39,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         let info = db.info().map_err(err)?;
         // Visible entries per cell: every visible object (a leaf entry) and every visible node
         // but the root (an internal entry). The naive query lists the cell's visible objects.
-        let grid = *db.grid().ok_or("the database holds no grid")?;
+        let grid = db.grid().cloned().ok_or("the database holds no grid")?;
         let centres = grid.cell_centres();
         let naive = QueryParams { mode: Mode::Naive, lod_rule: LodRule::Dov, ..Default::default() };
         let mut objects = 0usize;

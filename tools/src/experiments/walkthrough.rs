@@ -97,7 +97,7 @@ pub fn methods(camera: Camera) -> Vec<(&'static str, WalkMethod)> {
 
 pub fn run(ctx: &mut Ctx) -> Result<()> {
     let (_, db) = ctx.main_database()?;
-    let grid = *db.grid().ok_or("the database holds no grid")?;
+    let grid = db.grid().cloned().ok_or("the database holds no grid")?;
     let steps = if ctx.cfg.scale == super::Scale::Small { 30 } else { 80 };
     let path = hdov::city::avenue_walk(&grid, steps);
     let camera = camera(WIDTH, HEIGHT);

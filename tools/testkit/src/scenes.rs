@@ -291,6 +291,30 @@ pub fn street_with_gaps() -> (Scene, ViewGrid) {
     (b.build(), grid)
 }
 
+/// A two-storey building, 10 × 10 m, as a BIM export has it: one object per slab, per wall and
+/// per storey's partition, no grid of its own. Ground slab at y = 0, upper floor at 3.3, roof at
+/// 6.3–6.6; 0.3 m outer walls; on the ground floor a partition at x = 5 with a door (z 4–5, 2.2 m
+/// high) and a solid core, x and z from 6 to 9.7, 3 m high (a lift shaft's concrete, say), whose
+/// middle no one can stand in. Viewers' eyes are at 1–2 m above either floor (or on the roof).
+pub fn two_storey_building() -> Scene {
+    let mut b = SceneBuilder::default();
+    let v = Vec3::new;
+    b.aabox(v(0.0, -0.3, 0.0), v(10.0, 0.0, 10.0));
+    b.aabox(v(0.0, 3.0, 0.0), v(10.0, 3.3, 10.0));
+    b.aabox(v(0.0, 6.3, 0.0), v(10.0, 6.6, 10.0));
+    for (y0, y1) in [(0.0, 3.0), (3.3, 6.3)] {
+        b.aabox(v(0.0, y0, 0.0), v(0.3, y1, 10.0));
+        b.aabox(v(9.7, y0, 0.0), v(10.0, y1, 10.0));
+        b.aabox(v(0.3, y0, 0.0), v(9.7, y1, 0.3));
+        b.aabox(v(0.3, y0, 9.7), v(9.7, y1, 10.0));
+    }
+    b.aabox(v(4.85, 0.0, 0.3), v(5.15, 3.0, 4.0));
+    b.aabox(v(4.85, 0.0, 5.0), v(5.15, 3.0, 9.7));
+    b.aabox(v(4.85, 2.2, 4.0), v(5.15, 3.0, 5.0));
+    b.aabox(v(6.0, 0.0, 6.0), v(9.7, 3.0, 9.7));
+    b.build()
+}
+
 /// A picket fence in front of small objects, sized in texels of a cube map of resolution `r` seen
 /// from the grid's middle: bars 0.25, 0.5, 1, 2, 4, 8 texels wide (cycled), gaps 0.5–4 bars wide,
 /// 10 units from the grid's far edge; behind it 40 posts and boxes, 0.1–0.8 wide, then a back
@@ -338,7 +362,7 @@ pub fn audit_scene(name: &str, r: u32) -> Result<(Scene, ViewGrid), String> {
         "city" => {
             let params = hdov::city::CityParams { seed: 1, ..Default::default() };
             let scene = hdov::city::generate(&params).map_err(|e| e.to_string())?;
-            let grid = scene.grid.ok_or("the city brings a grid")?;
+            let grid = scene.grid.clone().ok_or("the city brings a grid")?;
             (scene, grid)
         }
         other => return Err(format!("unknown scene '{other}': street, audit, fence or city")),

@@ -1,0 +1,275 @@
+//! View cells where a viewer can stand. A box of cells at one height serves a city street; in a
+//! building or a game level it has no cells on the upper storeys, and cells inside walls, floors
+//! and rock that cost time and answer nothing. [`Scene::view_grid`] finds, without a region or a
+//! grid given, the places a person can be: eye height above an up-facing floor, in empty space,
+//! on every storey, and keeps exactly the cells of a lattice that hold such places
+//! ([`ViewGrid::present`]).
+//!
+//! Vertical lines through the scene, 8 × 8 per cell column, meet the triangles above and below;
+//! a surface facing up within 45° of the vertical is a floor where it leaves no solid around
+//! (counting the undersides entered and the tops left on the way up: a box standing on a floor
+//! hides that floor) and has room for the lowest eye height up to the next surface (a ceiling, or
+//! none: the sky). Each floor's band of eye heights marks the cells it meets. Layers of cells are at most the lowest eye height tall, so that a cell marked from a
+//! floor never reaches below it into the storey underneath.
+
+use glam::Vec3;
+
+use super::Scene;
+use crate::error::{Error, Param, Result};
+use crate::geom::Aabb;
+use crate::grid::{CellSet, ViewGrid};
+
+/// Vertical lines per cell edge (8 × 8 per cell column): floors narrower than an eighth of a cell
+/// (a ledge, a step's nose) may go unseen.
+const LINES_PER_CELL: u32 = 8;
+
+/// A floor faces up within 45° of the vertical (steeper is a wall or a ramp no one stands on).
+const FLOOR_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// The heights above a floor where a viewer's eye may be, in scene units: from `low` (crouching,
+/// a short viewer) up to, not including, `high` (standing tall).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeHeights {
+    /// The lowest eye height; also the headroom a floor needs.
+    pub low: f32,
+    /// The highest eye height.
+    pub high: f32,
+}
+
+impl Default for EyeHeights {
+    /// 1 to 2 scene units: a person's eyes in metres (1.5–1.75 standing, about 1.1 crouching),
+    /// and a game character's (Quake's 50 units of eye height are 1.27–1.56 m, as converted).
+    fn default() -> Self {
+        EyeHeights { low: 1.0, high: 2.0 }
+    }
+}
+
+impl EyeHeights {
+    /// Checks that `0 < low ≤ high`, both finite.
+    pub fn check(&self) -> Result<()> {
+        if !(self.low.is_finite() && self.high.is_finite() && 0.0 < self.low && self.low <= self.high) {
+            return Err(Error::bad_param(
+                Param::EyeHeights,
+                format!("{},{} must be two finite heights with 0 < LOW ≤ HIGH", self.low, self.high),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// The grid of view cells a build uses: `region` and `dims`/`cell_size` as given
+    /// ([`ViewGrid::resolve`]), else the scene's own grid (recut to `cell_size` if given), else
+    /// the cells where a viewer can stand, `cell_size` wide (default: a sixteenth of the scene's
+    /// longer horizontal side) and at most `eyes.low` tall ([`Scene::standable_grid`]). A scene
+    /// with no floor at all (objects in the air, a façade, a scan without its ground) gets one
+    /// layer of cells over its footprint at eye height above its lowest point, as before.
+    pub fn view_grid(
+        &self,
+        region: Option<Aabb>,
+        dims: Option<[u32; 3]>,
+        cell_size: Option<f32>,
+        eyes: EyeHeights,
+    ) -> Result<ViewGrid> {
+        if region.is_some() || dims.is_some() || self.grid.is_some() {
+            return ViewGrid::resolve(self.bounds(), self.grid.clone(), region, dims, cell_size);
+        }
+        let e = self.bounds().extent();
+        let size = cell_size.unwrap_or(e.x.max(e.z) / 16.0);
+        match self.standable_grid(size, eyes) {
+            Err(Error::BadParam { param: Param::Region, .. }) if !self.bounds().is_empty() => {
+                ViewGrid::resolve(self.bounds(), None, None, None, cell_size)
+            }
+            other => other,
+        }
+    }
+
+    /// The cells, `cell_size` wide and `min(cell_size, eyes.low)` tall, that hold a place where a
+    /// viewer can stand (module documentation). Refused when `cell_size` is not a positive
+    /// length, when the lattice would pass [`ViewGrid::MAX_CELLS`], and when no floor is found.
+    /// Costs O(triangles × lines each covers) time and memory for the lines' crossings.
+    pub fn standable_grid(&self, cell_size: f32, eyes: EyeHeights) -> Result<ViewGrid> {
+        eyes.check()?;
+        if !(cell_size.is_finite() && cell_size > 0.0) {
+            return Err(Error::bad_param(Param::CellSize, format!("{cell_size} must be a positive length")));
+        }
+        let bounds = self.bounds();
+        if bounds.is_empty() {
+            return Err(Error::bad_param(Param::Region, "the scene is empty: no floor to stand on"));
+        }
+        let e = bounds.extent();
+        let columns = |x: f32| (f64::from(x) / f64::from(cell_size)).ceil().max(1.0);
+        let (cx, cz) = (columns(e.x), columns(e.z));
+        let lines = cx * cz * f64::from(LINES_PER_CELL * LINES_PER_CELL);
+        if cx * cz > ViewGrid::MAX_CELLS as f64 {
+            let reason = format!("{cell_size} cuts the scene's footprint into {:.0} columns of cells, more than {}", cx * cz, ViewGrid::MAX_CELLS);
+            return Err(Error::bad_param(Param::CellSize, reason));
+        }
+        let (cx, cz) = (cx as u32, cz as u32);
+        let lines_x = cx * LINES_PER_CELL;
+        let spacing = cell_size / LINES_PER_CELL as f32;
+        let origin = bounds.min;
+        let crossings = self.crossings(origin, spacing, [lines_x, cz * LINES_PER_CELL]);
+        let floors = floors(&crossings, eyes);
+        if floors.is_empty() {
+            let reason = format!(
+                "no floor found in {lines:.0} vertical lines: nowhere in this scene has an up-facing surface with {} of room above it; give --region and --grid",
+                eyes.low
+            );
+            return Err(Error::bad_param(Param::Region, reason));
+        }
+        // Layers start at the lowest eye, at most the lowest eye height tall.
+        let layer = cell_size.min(eyes.low);
+        let y0 = floors.iter().map(|f| f.1).fold(f32::INFINITY, f32::min) + eyes.low;
+        let top = floors.iter().map(|f| f.1 + (f.2 - f.1).min(eyes.high)).fold(f32::NEG_INFINITY, f32::max);
+        let ny = ((f64::from(top - y0) / f64::from(layer)).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32;
+        let dims = [cx, ny, cz];
+        let region = Aabb::new(
+            Vec3::new(origin.x, y0, origin.z),
+            Vec3::new(origin.x + cx as f32 * cell_size, y0 + ny as f32 * layer, origin.z + cz as f32 * cell_size),
+        );
+        let lattice = u64::from(cx) * u64::from(ny) * u64::from(cz);
+        if lattice > ViewGrid::MAX_CELLS {
+            let reason = format!(
+                "{cell_size} cuts the storeys into a lattice of {cx}x{ny}x{cz} cells, more than {}; use larger cells",
+                ViewGrid::MAX_CELLS
+            );
+            return Err(Error::bad_param(Param::CellSize, reason));
+        }
+        let mut grid = ViewGrid::new(region, dims);
+        let mut ids = Vec::new();
+        for &(line, floor, ceiling) in &floors {
+            let (x, z) = (line % lines_x / LINES_PER_CELL, line / lines_x / LINES_PER_CELL);
+            let low = floor + eyes.low;
+            let high = (floor + eyes.high).min(ceiling);
+            // Eyes from `low` up to, not including, `high`: a band that ends on a layer's
+            // bottom does not reach into it.
+            let first = (((low - y0) / layer).floor().max(0.0) as u32).min(ny - 1);
+            let end = (((high - y0) / layer).ceil().max(1.0) as u32).min(ny);
+            for y in first..end.max(first + 1) {
+                ids.push(grid.cell_id([x, y, z]) as u32);
+            }
+        }
+        grid.present = Some(CellSet::from_ids(ids));
+        Ok(grid)
+    }
+
+    /// Where each vertical line of the lattice `origin + (i + ½, ·, k + ½) · spacing`,
+    /// `i < lines[0]`, `k < lines[1]`, crosses a triangle: `(line, height, facing)` with line
+    /// `k · lines[0] + i` and facing the triangle normal's vertical part (1 straight up, −1
+    /// straight down), sorted by line and height.
+    fn crossings(&self, origin: Vec3, spacing: f32, lines: [u32; 2]) -> Vec<(u32, f32, f32)> {
+        let mut out = Vec::new();
+        for object in 0..self.objects.len() {
+            for [a, b, c] in self.object_faces(object) {
+                let n = (b - a).cross(c - a);
+                let length = n.length();
+                // Vertical and degenerate triangles: no line crosses them.
+                if !length.is_finite() || length <= 0.0 || n.y.abs() <= length * 1e-6 {
+                    continue;
+                }
+                let facing = n.y / length;
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                // The lines whose x and z fall within the triangle's footprint box.
+                let span = |lo: f32, hi: f32, o: f32, n: u32| {
+                    let first = ((lo - o) / spacing - 0.5).ceil().max(0.0) as i64;
+                    let last = (((hi - o) / spacing - 0.5).floor() as i64).min(i64::from(n) - 1);
+                    first as u32..(last + 1).max(first) as u32
+                };
+                for k in span(lo.z, hi.z, origin.z, lines[1]) {
+                    let z = origin.z + (k as f32 + 0.5) * spacing;
+                    for i in span(lo.x, hi.x, origin.x, lines[0]) {
+                        let x = origin.x + (i as f32 + 0.5) * spacing;
+                        if let Some(y) = height_at([a, b, c], x, z) {
+                            out.push((k * lines[0] + i, y, facing));
+                        }
+                    }
+                }
+            }
+        }
+        out.sort_unstable_by(|p, q| p.0.cmp(&q.0).then(p.1.total_cmp(&q.1)));
+        out
+    }
+}
+
+/// The height of triangle `t` over `(x, z)`, if its footprint holds the point (edges included).
+pub fn height_at(t: [Vec3; 3], x: f32, z: f32) -> Option<f32> {
+    let [a, b, c] = t;
+    let d = (b.x - a.x) * (c.z - a.z) - (c.x - a.x) * (b.z - a.z);
+    let u = ((b.x - x) * (c.z - z) - (c.x - x) * (b.z - z)) / d;
+    let v = ((c.x - x) * (a.z - z) - (a.x - x) * (c.z - z)) / d;
+    let w = 1.0 - u - v;
+    (u >= 0.0 && v >= 0.0 && w >= 0.0).then_some(u * a.y + v * b.y + w * c.y)
+}
+
+/// The floors along the lines: `(line, floor height, height of the next surface above or +∞)`.
+/// Going up a line, a surface facing down is entered (the underside of a solid) and one facing
+/// up is left (its top), so that a count of solids entered says whether a height is in empty
+/// space; it never drops below zero, as files that hold only the surfaces seen from inside a
+/// level (a BSP export) give no undersides. Crossings within a hair of each other are one
+/// surface (a slab drawn from both sides, a box standing on a floor): entries before exits. A
+/// floor is such a surface that faces up within 45°, leaves the count at zero, and has at
+/// least `eyes.low` of room to the next surface above.
+fn floors(crossings: &[(u32, f32, f32)], eyes: EyeHeights) -> Vec<(u32, f32, f32)> {
+    let mut out = Vec::new();
+    for line in crossings.chunk_by(|a, b| a.0 == b.0) {
+        let mut inside = 0u32;
+        let mut k = 0;
+        while k < line.len() {
+            let y = line[k].1;
+            let hair = 1e-4 * eyes.low.max(y.abs() * 1e-3);
+            let group = line[k..].iter().take_while(|c| c.1 <= y + hair).count();
+            let surface = &line[k..k + group];
+            inside += surface.iter().filter(|c| c.2 < 0.0).count() as u32;
+            inside = inside.saturating_sub(surface.iter().filter(|c| c.2 > 0.0).count() as u32);
+            k += group;
+            let ceiling = line.get(k).map_or(f32::INFINITY, |c| c.1);
+            if inside == 0 && surface.iter().any(|c| c.2 >= FLOOR_COS) && ceiling - y >= eyes.low {
+                out.push((line[0].0, y, ceiling));
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heights_over_a_triangle_and_off_it() {
+        let t = [Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 2.0), Vec3::new(2.0, 3.0, 0.0)];
+        assert_eq!(height_at(t, 0.0, 0.0), Some(1.0));
+        assert!((height_at(t, 1.0, 0.5).unwrap() - 2.0).abs() < 1e-6);
+        assert_eq!(height_at(t, 1.5, 1.5), None);
+    }
+
+    #[test]
+    fn floors_need_room_and_a_ceiling_that_faces_down() {
+        let eyes = EyeHeights::default();
+        let c = [
+            // A floor (no underside, as a BSP export has it) under a ceiling 3 up, then a
+            // slab drawn from both sides at 3, floor over nothing.
+            (0, 0.0, 1.0),
+            (0, 3.0, -1.0),
+            (0, 3.0, 1.0),
+            // A closed slab whose top has a box standing on it up to a closed slab above: the
+            // box's inside is no place to stand; the upper slab's top is, under the sky.
+            (1, -0.3, -1.0),
+            (1, 0.0, 1.0),
+            (1, 0.0, -1.0),
+            (1, 3.0, 1.0),
+            (1, 3.0, -1.0),
+            (1, 3.3, 1.0),
+            // A floor under a ceiling half a unit up; a floor drawn twice, with sky; a slope
+            // steeper than 45°.
+            (2, 0.0, 1.0),
+            (2, 0.5, -1.0),
+            (3, 4.0, 0.9),
+            (3, 4.0, 0.9),
+            (4, 0.0, 0.6),
+        ];
+        let found = floors(&c, eyes);
+        assert_eq!(found, vec![(0, 0.0, 3.0), (0, 3.0, f32::INFINITY), (1, 3.3, f32::INFINITY), (3, 4.0, f32::INFINITY)]);
+    }
+}

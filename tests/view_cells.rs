@@ -1,0 +1,120 @@
+//! View cells where a viewer can stand (issue 31): a scene without a grid of its own gets cells
+//! at eye height above every storey's floor and none inside solids, queries from where a person
+//! stands are answered on every storey, and a point inside a solid is refused in one line.
+
+use glam::Vec3;
+use hdov::dov::BackendKind;
+use hdov::progress::Progress;
+use hdov::{
+    BuildParams, Database, EyeHeights, ItemKind, Mode, Overwrite, QueryParams, Sampling, Scene, VisibilityParams,
+};
+
+/// Where people stand in [`hdov_testkit::scenes::two_storey_building`], eyes 1.1–1.9 m up: both
+/// rooms of the ground floor (by the door, in a corner, beside the core), the upper floor (above
+/// the core too) and the roof.
+const STANDING: [[f32; 3]; 9] = [
+    [2.0, 1.7, 2.0],
+    [4.6, 1.1, 4.5],
+    [5.4, 1.9, 4.5],
+    [0.4, 1.5, 9.6],
+    [5.6, 1.6, 8.0],
+    [2.0, 5.0, 2.0],
+    [8.0, 4.6, 8.0],
+    [9.6, 5.2, 0.4],
+    [5.0, 8.3, 5.0],
+];
+
+/// Inside the core, inside the upper floor's slab, under the ground slab, and above the roof's
+/// eye heights.
+const SOLID_OR_AIR: [[f32; 3]; 4] = [[7.5, 1.6, 7.5], [2.0, 3.15, 2.0], [5.0, -0.15, 5.0], [5.0, 9.5, 5.0]];
+
+fn grid(scene: &Scene) -> hdov::ViewGrid {
+    scene.view_grid(None, None, Some(2.0), EyeHeights::default()).unwrap()
+}
+
+#[test]
+fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
+    let scene = hdov_testkit::scenes::two_storey_building();
+    let g = grid(&scene);
+    let present = |p: [f32; 3]| g.cell_of(Vec3::from(p)).is_some_and(|c| g.is_present(g.cell_id(c)));
+    for p in STANDING {
+        assert!(present(p), "{p:?} is where a person stands, but in no view cell");
+    }
+    for p in SOLID_OR_AIR {
+        assert!(!present(p), "{p:?} is inside a solid or out of reach, but in a view cell");
+    }
+    // Cells are 2 m wide and one eye height (1 m) tall. On the ground floor (eyes 1–2 m: one
+    // layer) the core and the walls around it fill 4 of the 25 columns; upstairs (eyes at
+    // 4.3–5.3) and on the roof (7.6–8.6) two layers of all 25.
+    assert_eq!(g.cell_size(), Vec3::new(2.0, 1.0, 2.0));
+    let layer = |y: u32| g.present_ids().filter(|&id| g.cell_coords(id)[1] == y).count();
+    assert_eq!((0..g.dims[1]).map(layer).collect::<Vec<_>>(), vec![21, 0, 0, 25, 25, 0, 25, 25]);
+    // A cell marked from a floor never reaches below it: every cell's bottom is at or above
+    // the ground floor, and none spans the upper floor's slab (3.0–3.3).
+    for id in g.present_ids() {
+        let b = g.cell_box(g.cell_coords(id));
+        assert!(b.min.y >= 0.0 && !(b.min.y < 3.0 && b.max.y > 3.3), "cell {id} spans {:?}", [b.min.y, b.max.y]);
+    }
+}
+
+#[test]
+fn nowhere_to_stand_falls_back_and_bad_eye_heights_are_refused() {
+    // A vertical sheet has no surface facing up: no cells where a viewer stands, and the
+    // default grid falls back to one layer over the footprint at eye height.
+    let mut sheet = Scene::default();
+    sheet.add_box("sheet", Vec3::ZERO, Vec3::new(0.0, 3.0, 4.0));
+    let e = sheet.standable_grid(1.0, EyeHeights::default()).unwrap_err().to_string();
+    assert!(e.contains("no floor found"), "{e}");
+    let g = sheet.view_grid(None, None, Some(1.0), EyeHeights::default()).unwrap();
+    assert_eq!((g.present, g.dims), (None, [1, 1, 4]));
+    let scene = hdov_testkit::scenes::two_storey_building();
+    for (low, high) in [(0.0, 1.0), (2.0, 1.0), (f32::NAN, 1.0)] {
+        let e = scene.view_grid(None, None, Some(2.0), EyeHeights { low, high }).unwrap_err().to_string();
+        assert!(e.starts_with("eye_heights: ") && !e.contains('\n'), "{e}");
+    }
+    let e = scene.view_grid(None, None, Some(0.0001), EyeHeights::default()).unwrap_err().to_string();
+    assert!(e.starts_with("cell_size: ") && e.contains("more than"), "{e}");
+}
+
+#[test]
+fn both_storeys_answer_and_a_solid_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut scene = hdov_testkit::scenes::two_storey_building();
+    scene.grid = Some(grid(&scene));
+    let params = BuildParams {
+        objects: hdov::ObjectParts::File,
+        visibility: Some(VisibilityParams {
+            resolution: 32,
+            backend: BackendKind::Cpu,
+            sampling: Sampling::CORNERS,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let dir = tmp.path().join("db");
+    let report = hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+    let g = scene.grid.as_ref().unwrap();
+    let db = Database::open(&dir).unwrap();
+    assert_eq!(db.info().unwrap().cells, g.present_count() as u64);
+    assert_eq!(report.manifest.visibility.as_ref().unwrap().cells_computed, g.present_count() as u64);
+    assert_eq!(db.grid(), Some(g));
+
+    let naive = QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() };
+    // The partition with the door (objects 11–13) is seen from the ground floor only.
+    let partition = |p: [f32; 3]| {
+        let a = db.query(Vec3::from(p), &naive).unwrap();
+        a.items.iter().any(|i| i.kind == ItemKind::Object && (11..=13).contains(&i.id))
+    };
+    for p in STANDING {
+        let a = db.query(Vec3::from(p), &naive).unwrap();
+        assert!(!a.items.is_empty(), "{p:?}: nothing visible");
+    }
+    assert!(partition(STANDING[0]) && partition(STANDING[4]));
+    assert!(!partition(STANDING[5]) && !partition(STANDING[6]), "the upper floor sees through its slab");
+    for p in SOLID_OR_AIR {
+        let e = db.query(Vec3::from(p), &naive).unwrap_err().to_string();
+        assert!(e.starts_with("at: ") && !e.contains('\n'), "{e}");
+    }
+    let e = db.query(Vec3::new(7.5, 1.6, 7.5), &naive).unwrap_err().to_string();
+    assert!(e.contains("is in no view cell"), "{e}");
+}

@@ -1,0 +1,300 @@
+//! Real game levels, measured as a user meets them (issue 31): each Quake III / OpenArena level
+//! (`.bsp`, from `tools/corpus/openarena.sh`) is converted to an OBJ with one group per shader,
+//! as exporters write levels, built as `hdov build LEVEL.obj --cell-size C` builds it (cells
+//! where a viewer can stand, the default sampler, CPU backend), and asked from every place a
+//! player stands (spawn points and pick-ups, dropped to the floor, eyes 50 units up).
+//!
+//! ```sh
+//! tools/corpus/openarena.sh            # levels into tools/corpus/data/ (not in git)
+//! cargo run --release -p hdov-tools --bin level-corpus -- tools/corpus/data/oa_dm1.bsp \
+//!     [--cell-size 2] [--objects file] [--resolution 128] [--truth 256] [--csv OUT] [--chart OUT.svg]
+//! ```
+//!
+//! Per level: build seconds and view cells; per viewpoint whether it is refused; the faces of
+//! the default answer (threshold mode, default η) and of the naive one (every visible object at
+//! full detail) against the level's own PVS (the faces of every leaf in a cluster the compiler's
+//! bit vectors mark visible from the viewpoint's cluster) and against the triangles seen from
+//! the viewpoint (a full id cube map of every triangle at `--truth` texels per edge, by the CPU
+//! tracer); the wrong share (solid angle of texels whose object the naive answer lacks, over all
+//! texels that show a surface) as mean, p99 and max.
+
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Parser;
+use glam::Vec3;
+use hdov::dov::IdCube;
+use hdov::scene::standable::height_at;
+use hdov::{
+    BackendKind, BuildParams, Database, EyeHeights, ItemKind, Mode, ObjectParts, Overwrite, Progress, QueryParams,
+    Scene, VisibilityParams,
+};
+use hdov_testkit::view_error::wrong_share;
+use hdov_tools::corpus::bsp::{EYE_UNITS, Level, METRES_PER_UNIT};
+use hdov_tools::experiments::charts::{Panel, Series, write_svg};
+use hdov_tools::experiments::quantile;
+
+#[derive(Parser)]
+struct Args {
+    /// Levels (.bsp).
+    levels: Vec<PathBuf>,
+    /// `hdov build --cell-size`.
+    #[arg(long, default_value_t = 2.0)]
+    cell_size: f32,
+    /// `hdov build --objects`, one build each: file, geometry or both (`file,geometry`).
+    #[arg(long, default_value = "file", value_delimiter = ',')]
+    objects: Vec<ObjectParts>,
+    /// `hdov build --resolution`.
+    #[arg(long, default_value_t = 128)]
+    resolution: u32,
+    /// Texels per cube-face edge of the truth.
+    #[arg(long, default_value_t = 256)]
+    truth: u32,
+    /// Where the converted OBJ files and the databases go (default: a temporary folder).
+    #[arg(long)]
+    work: Option<PathBuf>,
+    /// One row per viewpoint.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Answer faces over the PVS's against the wrong share, a point per level.
+    #[arg(long)]
+    chart: Option<PathBuf>,
+}
+
+/// What one level measured with one choice of objects.
+struct LevelRow {
+    name: String,
+    parts: ObjectParts,
+    triangles: usize,
+    objects: usize,
+    cells: usize,
+    lattice: usize,
+    build_s: f64,
+    viewpoints: usize,
+    refused: usize,
+    /// Per answered viewpoint: default answer faces, naive faces, PVS faces, seen triangles,
+    /// wrong share.
+    answered: Vec<[f64; 5]>,
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = Args::parse();
+    println!("{}", hdov_tools::machine());
+    let tmp = tempfile::tempdir()?;
+    let work = args.work.clone().unwrap_or_else(|| tmp.path().to_path_buf());
+    std::fs::create_dir_all(&work)?;
+    let mut csv = match &args.csv {
+        Some(p) => {
+            let mut f = std::fs::File::create(p)?;
+            writeln!(
+                f,
+                "level,objects,viewpoint,class,x,y,z,refused,answer_faces,naive_faces,pvs_faces,seen_triangles,wrong_share"
+            )?;
+            Some(f)
+        }
+        None => None,
+    };
+    let mut rows = Vec::new();
+    for path in &args.levels {
+        let name = path.file_stem().map_or("level".into(), |s| s.to_string_lossy().to_string());
+        let level = Level::parse(&std::fs::read(path)?).map_err(|e| format!("{}: {e}", path.display()))?;
+        // As a user has it: an OBJ, one group per shader.
+        let obj = work.join(format!("{name}.obj"));
+        write_obj(&level, &obj)?;
+        let (mut scene, _) = Scene::load(&obj)?;
+        scene.grid = Some(scene.view_grid(None, None, Some(args.cell_size), EyeHeights::default())?);
+        for &parts in &args.objects {
+            let row = measure(&args, &level, &name, &scene, parts, &work, &mut csv)?;
+            print_level(&row);
+            rows.push(row);
+        }
+    }
+    print_table(&rows);
+    if let Some(path) = &args.chart {
+        let mut panel = Panel::new(
+            "Answers on real levels: faces against the game's own PVS, and what they miss",
+            "answer faces / PVS faces (mean over viewpoints)",
+            "wrong share of the view (mean)",
+        )
+        .log_y();
+        for r in &rows {
+            let ratio = mean(r.answered.iter().filter(|m| m[2] > 0.0).map(|m| m[0] / m[2]));
+            let wrong = mean(r.answered.iter().map(|m| m[4])).max(1e-9);
+            let label = format!("{}, --objects {} ({} objects)", r.name, r.parts, r.objects);
+            panel.series.push(Series::new(label, vec![(ratio, wrong)]));
+        }
+        write_svg(path, "level-corpus", &[panel], 1)?;
+        println!("chart: {}", path.display());
+    }
+    Ok(())
+}
+
+/// Builds `scene` with `parts` and asks it from every place a player stands in `level`.
+fn measure(
+    args: &Args,
+    level: &Level,
+    name: &str,
+    scene: &Scene,
+    parts: ObjectParts,
+    work: &std::path::Path,
+    csv: &mut Option<std::fs::File>,
+) -> Result<LevelRow, Box<dyn std::error::Error>> {
+    let params = BuildParams {
+        objects: parts,
+        visibility: Some(VisibilityParams {
+            resolution: args.resolution,
+            backend: BackendKind::Cpu,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let dir = work.join(format!("{name}-{parts}.hdov"));
+    let start = Instant::now();
+    hdov::build(scene, &dir, &params, Overwrite::Ours, &Progress::hidden())?;
+    let build_s = start.elapsed().as_secs_f64();
+    let db = Database::open(&dir)?;
+    let grid = db.grid().cloned().ok_or("built without a grid")?;
+
+    // The truth: every triangle of the database's objects its own object.
+    let measured = hdov::objects_of(scene, &params).into_owned();
+    let (truth_scene, parent) = per_triangle(&measured);
+    let mut truth = hdov::open_backend(&truth_scene, args.truth, BackendKind::Cpu, &Default::default())?;
+    let cube = truth.cube_map().clone();
+    let mut ids = IdCube::new(args.truth);
+
+    let views = viewpoints(level);
+    let mut row = LevelRow {
+        name: name.to_string(),
+        parts,
+        triangles: level.triangles.len(),
+        objects: measured.objects.len(),
+        cells: grid.present_count(),
+        lattice: grid.cell_count(),
+        build_s,
+        viewpoints: views.len(),
+        refused: 0,
+        answered: Vec::new(),
+    };
+    for (k, (class, eye)) in views.iter().enumerate() {
+        let pvs = level.cluster_at(*eye).map_or(f64::NAN, |c| level.pvs_triangles(c) as f64);
+        let answer = db.query(*eye, &QueryParams::default());
+        let naive = db.query(*eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() });
+        let (Ok(answer), Ok(naive)) = (answer, naive) else {
+            row.refused += 1;
+            if let Some(f) = csv {
+                writeln!(f, "{name},{parts},{k},{class},{},{},{},1,,,{pvs},,", eye.x, eye.y, eye.z)?;
+            }
+            continue;
+        };
+        truth.render_ids(*eye, &mut ids)?;
+        let seen: HashSet<u32> = (0..ids.ids.len()).filter_map(|t| ids.object_at(t)).collect();
+        let has: HashSet<u32> = naive.items.iter().filter(|i| i.kind == ItemKind::Object).map(|i| i.id).collect();
+        let wrong = wrong_share(&ids, &cube, |t| has.contains(&parent[t as usize])).share();
+        let faces = |a: &hdov::Answer| a.items.iter().map(|i| f64::from(i.faces)).sum::<f64>();
+        let m = [faces(&answer), faces(&naive), pvs, seen.len() as f64, wrong];
+        if let Some(f) = csv {
+            writeln!(
+                f,
+                "{name},{parts},{k},{class},{},{},{},0,{},{},{},{},{:e}",
+                eye.x, eye.y, eye.z, m[0], m[1], m[2], m[3], m[4]
+            )?;
+        }
+        row.answered.push(m);
+    }
+    Ok(row)
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n == 0 { f64::NAN } else { s / n as f64 }
+}
+
+fn print_level(r: &LevelRow) {
+    println!(
+        "{} (--objects {}): {} triangles, {} objects, {} view cells (lattice {}), built in {:.1} s; {} viewpoints, {} refused",
+        r.name, r.parts, r.triangles, r.objects, r.cells, r.lattice, r.build_s, r.viewpoints, r.refused
+    );
+}
+
+fn print_table(rows: &[LevelRow]) {
+    println!(
+        "\n| level | --objects | triangles | objects | view cells | build s | refused | answer / PVS | naive / PVS | answer / seen | wrong mean | p99 | max |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let ratio = |k: usize, of: usize| mean(r.answered.iter().filter(|m| m[of] > 0.0).map(|m| m[k] / m[of]));
+        let wrong: Vec<f64> = r.answered.iter().map(|m| m[4]).collect();
+        println!(
+            "| {} | {} | {} | {} | {} of {} | {:.1} | {} of {} | {:.2}× | {:.2}× | {:.1}× | {:.1e} | {:.1e} | {:.1e} |",
+            r.name,
+            r.parts,
+            r.triangles,
+            r.objects,
+            r.cells,
+            r.lattice,
+            r.build_s,
+            r.refused,
+            r.viewpoints,
+            ratio(0, 2),
+            ratio(1, 2),
+            ratio(0, 3),
+            mean(wrong.iter().copied()),
+            quantile(&wrong, 0.99),
+            wrong.iter().copied().fold(0.0, f64::max)
+        );
+    }
+}
+
+/// The level as an OBJ file: one group per shader.
+fn write_obj(level: &Level, path: &std::path::Path) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut next = 1usize;
+    for (shader, triangles) in level.by_shader() {
+        writeln!(out, "g {}", shader.replace(char::is_whitespace, "_"))?;
+        for t in &triangles {
+            for v in t {
+                writeln!(out, "v {} {} {}", v.x, v.y, v.z)?;
+            }
+            writeln!(out, "f {} {} {}", next, next + 1, next + 2)?;
+            next += 3;
+        }
+    }
+    out.flush()
+}
+
+/// Every triangle of `scene`'s objects as an object of its own, and the object it came from.
+fn per_triangle(scene: &Scene) -> (Scene, Vec<u32>) {
+    let mut out = Scene::default();
+    let mut parent = Vec::new();
+    for o in 0..scene.objects.len() {
+        for [a, b, c] in scene.object_faces(o) {
+            let mesh = hdov::Mesh { positions: vec![a.to_array(), b.to_array(), c.to_array()], indices: vec![0, 1, 2] };
+            let m = out.add_mesh("t", mesh);
+            out.add_object(&format!("t{}", parent.len()), m, glam::Mat4::IDENTITY);
+            parent.push(o as u32);
+        }
+    }
+    (out, parent)
+}
+
+/// Where players stand, eyes up: each place dropped onto the highest floor (a triangle facing up)
+/// at most 4 m under it (a pick-up floats a little; one with no floor under it is left out).
+fn viewpoints(level: &Level) -> Vec<(String, Vec3)> {
+    let eye = EYE_UNITS * METRES_PER_UNIT;
+    level
+        .places
+        .iter()
+        .filter_map(|(class, p)| {
+            let floor = level
+                .triangles
+                .iter()
+                .filter(|t| (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero().y > 0.7)
+                .filter_map(|t| height_at(*t, p.x, p.z))
+                .filter(|&y| y <= p.y + 0.1 && y >= p.y - 4.0)
+                .fold(f32::NEG_INFINITY, f32::max);
+            floor.is_finite().then(|| (class.clone(), Vec3::new(p.x, floor + eye, p.z)))
+        })
+        .collect()
+}
