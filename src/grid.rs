@@ -156,6 +156,9 @@ impl ViewGrid {
         if self.dims.contains(&0) {
             return Err(format!("grid dims {:?} must all be at least 1", self.dims));
         }
+        if self.cell_count() as u64 > Self::MAX_CELLS {
+            return Err(format!("grid dims {:?} make more than {} cells", self.dims, Self::MAX_CELLS));
+        }
         if let Some(set) = &self.present {
             set.check(self.cell_count())?;
             if set.is_empty() {

@@ -166,6 +166,30 @@ fn bad_gltf_files_are_refused_in_one_line() {
         assert!(err.contains(expect), "{what}: expected '{expect}' in: {err}");
         assert!(err.contains("bad.gltf") && !err.contains('\n'), "{what}: {err}");
     }
+    // Issue 32's audit: small files that would copy their buffers without end. A second buffer
+    // without a URI (the gltf crate lets every such buffer be the GLB chunk, copied each time):
+    let mut two = document(bin.len(), None);
+    two["buffers"] = json!([{ "byteLength": bin.len() }, { "byteLength": bin.len() }]);
+    let glb = dir.path().join("two.glb");
+    std::fs::write(&glb, hdov::export::glb(&two, &bin)).unwrap();
+    assert!(Scene::load(&glb).unwrap_err().to_string().contains("only buffer 0 is the binary chunk"));
+    // A mesh of 20,000 primitives on one accessor: 4.8 MB of vertices and indices from a
+    // 300-byte buffer.
+    let mut many = good.clone();
+    many["meshes"][0]["primitives"] = json!(vec![json!({ "attributes": { "POSITION": 0 }, "indices": 1 }); 20_000]);
+    let path = write_gltf(dir.path(), "many.gltf", &many);
+    let err = Scene::load(&path).unwrap_err().to_string();
+    assert!(err.contains("times over are read") && !err.contains('\n'), "{err}");
+    // A few primitives sharing an accessor are fine.
+    many["meshes"][0]["primitives"] = json!(vec![json!({ "attributes": { "POSITION": 0 }, "indices": 1 }); 3]);
+    let path = write_gltf(dir.path(), "few.gltf", &many);
+    assert_eq!(Scene::load(&path).unwrap().0.meshes[0].mesh.triangle_count(), 36);
+    // Buffers declaring more than a file may hold, in all.
+    let mut huge = good.clone();
+    huge["buffers"] = json!(vec![json!({ "byteLength": 1u64 << 33, "uri": "a.bin" }); 3]);
+    let path = write_gltf(dir.path(), "huge.gltf", &huge);
+    assert!(Scene::load(&path).unwrap_err().to_string().contains("in all"));
+
     // A GLB header declaring fewer bytes than itself (the gltf crate's unchecked subtraction,
     // found by the scene_gltf fuzz target).
     let mut short = hdov::export::glb(&document(bin.len(), None), &bin);

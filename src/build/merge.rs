@@ -147,10 +147,11 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         for_each_cell(&layout, range.start as u32..range.end as u32, |_, pages| {
             writers.iter_mut().try_for_each(|w| w.push_cell(&pages)).map_err(Error::from)
         })?;
-        info.cells_computed += s.info.cells_computed;
-        info.sample_points += s.info.sample_points;
-        info.floored_objects += s.info.floored_objects;
-        info.skipped_points += s.info.skipped_points;
+        // Counts read from the shards' manifests: summed without wrapping.
+        info.cells_computed = info.cells_computed.saturating_add(s.info.cells_computed);
+        info.sample_points = info.sample_points.saturating_add(s.info.sample_points);
+        info.floored_objects = info.floored_objects.saturating_add(s.info.floored_objects);
+        info.skipped_points = info.skipped_points.saturating_add(s.info.skipped_points);
         info.seconds += s.info.seconds;
     }
     info.layouts = kinds

@@ -55,10 +55,12 @@ impl Levels<'_> {
         pixels / bias_at_distance(d, far, mbr).max(f64::MIN_POSITIVE)
     }
 
-    /// The faces node `c`'s `nvo` visible objects would draw at their coarsest leaf LODs.
+    /// The faces node `c`'s `nvo` visible objects would draw at their coarsest leaf LODs. The
+    /// counts come from files: the product saturates instead of wrapping, and `nvo` counts at
+    /// most the node's objects.
     pub fn descent_cap(&self, c: u32, nvo: u32) -> u64 {
         let shape = &self.db.catalog().node_shapes[c as usize];
-        u64::from(nvo) * shape.coarsest_object_faces / u64::from(shape.objects.max(1))
+        u64::from(nvo.min(shape.objects)).saturating_mul(shape.coarsest_object_faces) / u64::from(shape.objects.max(1))
     }
 
     /// The faces node `c`'s `nvo` visible objects would draw at the levels the screen-error
@@ -68,7 +70,8 @@ impl Levels<'_> {
         let shape = &self.db.catalog().node_shapes[c as usize];
         let per_unit = self.params.camera.unwrap_or_default().pixels_per_unit();
         let far_error = pixels * f64::from(farthest(&self.cell_box, mbr)) / per_unit;
-        u64::from(nvo) * self.db.catalog().descent_faces_at(c, far_error) / u64::from(shape.objects.max(1))
+        let faces = self.db.catalog().descent_faces_at(c, far_error);
+        u64::from(nvo.min(shape.objects)).saturating_mul(faces) / u64::from(shape.objects.max(1))
     }
 
     /// `h·(1 + log_M s) < log_M(NVO)` (thesis eq. 5.4), with h = log_M m, m the node's leaf

@@ -81,6 +81,11 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         }
     }
     let buffers = load_buffers(doc, gltf.blob.as_deref(), path)?;
+    // Accessors may be shared by primitives, each of which is copied into its mesh: the copies
+    // may come to a few times the buffers, not a file's worth per line of JSON.
+    let buffer_bytes: u64 = buffers.iter().map(|b| b.len() as u64).sum();
+    let budget = READ_OVER.saturating_mul(buffer_bytes).saturating_add(1 << 20);
+    let mut copied = 0u64;
     let mut warnings = Vec::new();
     // Base meshes by glTF mesh index (`None`: no triangles).
     let mut meshes: Vec<Option<u32>> = Vec::new();
@@ -107,7 +112,17 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
                 return Err(bad(format!("mesh '{name}': index {i} past its {} vertices", positions.len())));
             }
             let triangles = triangles(mode, &indices);
+            copied = copied.saturating_add(12 * positions.len() as u64 + 4 * triangles.len() as u64);
+            if copied > budget {
+                return Err(bad(format!(
+                    "its primitives read {copied} bytes of vertices and indices from {buffer_bytes} bytes of buffers; at most {READ_OVER} times over are read"
+                )));
+            }
+            // Indices are u32: the mesh's vertices must stay within them.
             let base = out.positions.len() as u32;
+            if u32::try_from(out.positions.len() + positions.len()).is_err() {
+                return Err(bad(format!("mesh '{name}': more than {} vertices", u32::MAX)));
+            }
             out.positions.extend(positions);
             out.indices.extend(triangles.into_iter().map(|i| i + base));
         }
@@ -150,7 +165,19 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
                 None => warnings.push(format!("{}: node {}: its mesh has no triangles; skipped", path.display(), node.index())),
                 Some(m) => {
                     let base = node_name(&node);
-                    for transform in instances(doc, &node, &buffers).map_err(|r| bad(format!("node {}: {r}", node.index())))? {
+                    let transforms =
+                        instances(doc, &node, &buffers).map_err(|r| bad(format!("node {}: {r}", node.index())))?;
+                    // GPU instances come from buffer data that many nodes may share.
+                    if transforms.len() > 1 {
+                        copied = copied.saturating_add(64 * transforms.len() as u64);
+                        if copied > budget {
+                            return Err(bad(format!(
+                                "node {}: its instances and meshes copy {copied} bytes from {buffer_bytes} bytes of buffers; at most {READ_OVER} times over are read",
+                                node.index()
+                            )));
+                        }
+                    }
+                    for transform in transforms {
                         let name = names.give(&base);
                         scene.objects.push(Object { name, mesh: m, transform: world * transform, part: None });
                     }
@@ -182,12 +209,24 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
     Ok((scene, warnings))
 }
 
-/// Every buffer's bytes: the `.glb`'s binary chunk, a `data:` URI, or a file beside `path`.
+/// How many times over the buffers' bytes the meshes may copy (primitives sharing accessors).
+const READ_OVER: u64 = 16;
+
+/// Every buffer's bytes: the `.glb`'s binary chunk (buffer 0 only, as the GLB format has it), a
+/// `data:` URI, or a file beside `path`. The declared lengths are summed and bounded before any
+/// byte is read.
 fn load_buffers(doc: &gltf::Document, blob: Option<&[u8]>, path: &Path) -> Result<Vec<Vec<u8>>> {
     let bad = |reason: String| Error::bad_file(path, reason);
+    let declared = doc.buffers().try_fold(0u64, |sum, b| sum.checked_add(b.length() as u64));
+    if declared.is_none_or(|d| d > super::files::MAX_FILE_BYTES) {
+        return Err(bad(format!("its buffers declare more than {} bytes in all", super::files::MAX_FILE_BYTES)));
+    }
     let mut out = Vec::new();
     for buffer in doc.buffers() {
         let data = match buffer.source() {
+            gltf::buffer::Source::Bin if buffer.index() != 0 => {
+                return Err(bad(format!("buffer {} has no URI; only buffer 0 is the binary chunk", buffer.index())));
+            }
             gltf::buffer::Source::Bin => {
                 blob.ok_or_else(|| bad(format!("buffer {} refers to a binary chunk the file lacks", buffer.index())))?.to_vec()
             }

@@ -133,21 +133,30 @@ pub(crate) struct UniqueNames {
     in_file: std::collections::HashSet<String>,
     /// Names given so far.
     given: std::collections::HashSet<String>,
+    /// Per repeated name, the suffix to try next: n repeats of one name cost O(n), not O(n²).
+    next: std::collections::HashMap<String, u64>,
 }
 
 impl UniqueNames {
     /// For a file whose names are `names`.
     pub fn new<'a>(names: impl IntoIterator<Item = &'a str>) -> Self {
-        UniqueNames { in_file: names.into_iter().map(str::to_string).collect(), given: Default::default() }
+        UniqueNames {
+            in_file: names.into_iter().map(str::to_string).collect(),
+            given: Default::default(),
+            next: Default::default(),
+        }
     }
 
     /// The unique name for the next use of `name`.
     pub fn give(&mut self, name: &str) -> String {
         let unique = if self.given.contains(name) {
-            (2u64..)
+            let k = self.next.entry(name.to_string()).or_insert(2);
+            let unique = (*k..)
                 .map(|k| format!("{name}#{k}"))
                 .find(|n| !self.in_file.contains(n) && !self.given.contains(n))
-                .expect("a free suffix exists")
+                .expect("a free suffix exists");
+            *k = unique[name.len() + 1..].parse::<u64>().expect("the suffix just written") + 1;
+            unique
         } else {
             name.to_string()
         };

@@ -57,6 +57,28 @@ impl EyeHeights {
     }
 }
 
+/// What [`Scene::floors`] finds.
+#[derive(Clone, Debug)]
+pub struct Floors {
+    /// The lattice's corner (the scene's lowest x and z; y is the scene's lowest).
+    pub origin: Vec3,
+    /// Columns of cells along x and z.
+    pub columns: [u32; 2],
+    /// Each floor a line crosses, lines in order (x fastest), bottom up.
+    pub found: Vec<Floor>,
+}
+
+/// A floor where a vertical line crosses it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// The column of cells (x, z) the line is in.
+    pub column: [u32; 2],
+    /// The point on the floor.
+    pub at: Vec3,
+    /// The height of the next surface above (+∞: none).
+    pub ceiling: f32,
+}
+
 impl Scene {
     /// The grid of view cells a build uses: `region` and `dims`/`cell_size` as given
     /// ([`ViewGrid::resolve`]), else the scene's own grid (recut to `cell_size` if given), else
@@ -84,11 +106,12 @@ impl Scene {
         }
     }
 
-    /// The cells, `cell_size` wide and `min(cell_size, eyes.low)` tall, that hold a place where a
-    /// viewer can stand (module documentation). Refused when `cell_size` is not a positive
-    /// length, when the lattice would pass [`ViewGrid::MAX_CELLS`], and when no floor is found.
-    /// Costs O(triangles × lines each covers) time and memory for the lines' crossings.
-    pub fn standable_grid(&self, cell_size: f32, eyes: EyeHeights) -> Result<ViewGrid> {
+    /// The floors that vertical lines, 8 × 8 per column of cells `cell_size` wide, find
+    /// (module documentation), line by line and bottom up. Refused when `cell_size` is not a
+    /// positive length or cuts the footprint into more than [`ViewGrid::MAX_CELLS`] columns, and
+    /// when no floor is found. Costs O(triangles × lines each covers) time, and memory for the
+    /// lines' crossings.
+    pub fn floors(&self, cell_size: f32, eyes: EyeHeights) -> Result<Floors> {
         eyes.check()?;
         if !(cell_size.is_finite() && cell_size > 0.0) {
             return Err(Error::bad_param(Param::CellSize, format!("{cell_size} must be a positive length")));
@@ -110,18 +133,33 @@ impl Scene {
         let spacing = cell_size / LINES_PER_CELL as f32;
         let origin = bounds.min;
         let crossings = self.crossings(origin, spacing, [lines_x, cz * LINES_PER_CELL]);
-        let floors = floors(&crossings, eyes);
-        if floors.is_empty() {
+        let found: Vec<Floor> = floors(&crossings, eyes)
+            .into_iter()
+            .map(|(line, y, ceiling)| {
+                let (i, k) = (line % lines_x, line / lines_x);
+                let at = Vec3::new(origin.x + (i as f32 + 0.5) * spacing, y, origin.z + (k as f32 + 0.5) * spacing);
+                Floor { column: [i / LINES_PER_CELL, k / LINES_PER_CELL], at, ceiling }
+            })
+            .collect();
+        if found.is_empty() {
             let reason = format!(
                 "no floor found in {lines:.0} vertical lines: nowhere in this scene has an up-facing surface with {} of room above it; give --region and --grid",
                 eyes.low
             );
             return Err(Error::bad_param(Param::Region, reason));
         }
+        Ok(Floors { origin, columns: [cx, cz], found })
+    }
+
+    /// The cells, `cell_size` wide and `min(cell_size, eyes.low)` tall, that hold a place where a
+    /// viewer can stand (module documentation): those [`Scene::floors`] finds. Refused as it is,
+    /// and when the lattice would pass [`ViewGrid::MAX_CELLS`].
+    pub fn standable_grid(&self, cell_size: f32, eyes: EyeHeights) -> Result<ViewGrid> {
+        let Floors { origin, columns: [cx, cz], found: floors } = self.floors(cell_size, eyes)?;
         // Layers start at the lowest eye, at most the lowest eye height tall.
         let layer = cell_size.min(eyes.low);
-        let y0 = floors.iter().map(|f| f.1).fold(f32::INFINITY, f32::min) + eyes.low;
-        let top = floors.iter().map(|f| f.1 + (f.2 - f.1).min(eyes.high)).fold(f32::NEG_INFINITY, f32::max);
+        let y0 = floors.iter().map(|f| f.at.y).fold(f32::INFINITY, f32::min) + eyes.low;
+        let top = floors.iter().map(|f| f.at.y + (f.ceiling - f.at.y).min(eyes.high)).fold(f32::NEG_INFINITY, f32::max);
         let ny = ((f64::from(top - y0) / f64::from(layer)).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32;
         let dims = [cx, ny, cz];
         let region = Aabb::new(
@@ -138,10 +176,10 @@ impl Scene {
         }
         let mut grid = ViewGrid::new(region, dims);
         let mut ids = Vec::new();
-        for &(line, floor, ceiling) in &floors {
-            let (x, z) = (line % lines_x / LINES_PER_CELL, line / lines_x / LINES_PER_CELL);
-            let low = floor + eyes.low;
-            let high = (floor + eyes.high).min(ceiling);
+        for f in &floors {
+            let [x, z] = f.column;
+            let low = f.at.y + eyes.low;
+            let high = (f.at.y + eyes.high).min(f.ceiling);
             // Eyes from `low` up to, not including, `high`: a band that ends on a layer's
             // bottom does not reach into it.
             let first = (((low - y0) / layer).floor().max(0.0) as u32).min(ny - 1);

@@ -12,7 +12,12 @@ read -r -a maps <<<"${maps[*]}"
 mkdir -p data
 deb=$(ls data/openarena-081-maps_*.deb 2>/dev/null | head -1 || true)
 if [ -z "$deb" ]; then
-  (cd data && apt-get download openarena-081-maps)
+  if ! (cd data && apt-get download openarena-081-maps 2>/dev/null); then
+    SUDO=""
+    [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq
+    (cd data && apt-get download openarena-081-maps)
+  fi
   deb=$(ls data/openarena-081-maps_*.deb | head -1)
 fi
 pk3=data/pak1-maps.pk3

@@ -329,8 +329,16 @@ impl fmt::Debug for Layout {
     }
 }
 
+/// A layout file, refused when its pages are larger than a layout's in-page u16 offsets reach
+/// (a page file alone may declare pages up to 16 MiB).
 fn open_paged(dir: &Path, name: &str, tag: [u8; 4], mode: ReadMode) -> Result<PagedFile> {
-    Ok(PagedFile::new(PageFile::open(&dir.join(name), tag, mode)?))
+    let path = dir.join(name);
+    let file = PageFile::open(&path, tag, mode)?;
+    if file.page_size() > MAX_LAYOUT_PAGE_SIZE {
+        let reason = format!("pages of {} bytes, more than a layout's {MAX_LAYOUT_PAGE_SIZE}", file.page_size());
+        return Err(Error::corrupt(&path, reason));
+    }
+    Ok(PagedFile::new(file))
 }
 
 impl Layout {

@@ -29,7 +29,7 @@ use hdov::dov::IdCube;
 use hdov::scene::standable::height_at;
 use hdov::{
     BackendKind, BuildParams, Database, EyeHeights, ItemKind, Mode, ObjectParts, Overwrite, Progress, QueryParams,
-    Scene, VisibilityParams,
+    Sampling, Scene, VisibilityParams,
 };
 use hdov_testkit::view_error::wrong_share;
 use hdov_tools::corpus::bsp::{EYE_UNITS, Level, METRES_PER_UNIT};
@@ -38,14 +38,24 @@ use hdov_tools::experiments::quantile;
 
 #[derive(Parser)]
 struct Args {
-    /// Levels (.bsp).
+    /// Levels (.bsp), or any scene hdov reads (.obj, .gltf, .glb, .json): a building, a scan.
     levels: Vec<PathBuf>,
+    /// A level as one mesh (one OBJ group), as a scan or a merged export has it.
+    #[arg(long)]
+    single_mesh: bool,
+    /// Viewpoints of a scene without spawn points: this many floors, drawn at random (seeded)
+    /// from those the build's lines find, eyes 1.6 up.
+    #[arg(long, default_value_t = 60)]
+    viewpoints: usize,
     /// `hdov build --cell-size`.
     #[arg(long, default_value_t = 2.0)]
     cell_size: f32,
     /// `hdov build --objects`, one build each: file, geometry or both (`file,geometry`).
     #[arg(long, default_value = "file", value_delimiter = ',')]
     objects: Vec<ObjectParts>,
+    /// `hdov build --samples` (default: the build's, region rays).
+    #[arg(long)]
+    samples: Option<Sampling>,
     /// `hdov build --resolution`.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
@@ -61,6 +71,13 @@ struct Args {
     /// Answer faces over the PVS's against the wrong share, a point per level.
     #[arg(long)]
     chart: Option<PathBuf>,
+    /// Print, for each viewpoint wrong by more than this, the objects its answer lacks.
+    #[arg(long)]
+    explain: Option<f64>,
+    /// Exit 1 when a place a player stands is refused, a level has none, or a viewpoint's wrong
+    /// share is over this (CI: issue 31's bound, 1e-4).
+    #[arg(long)]
+    check: Option<f64>,
 }
 
 /// What one level measured with one choice of objects.
@@ -99,14 +116,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows = Vec::new();
     for path in &args.levels {
         let name = path.file_stem().map_or("level".into(), |s| s.to_string_lossy().to_string());
-        let level = Level::parse(&std::fs::read(path)?).map_err(|e| format!("{}: {e}", path.display()))?;
-        // As a user has it: an OBJ, one group per shader.
-        let obj = work.join(format!("{name}.obj"));
-        write_obj(&level, &obj)?;
-        let (mut scene, _) = Scene::load(&obj)?;
+        let (mut scene, level, views) = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bsp")) {
+            let level = Level::parse(&std::fs::read(path)?).map_err(|e| format!("{}: {e}", path.display()))?;
+            // As a user has it: an OBJ, one group per shader (or one in all).
+            let obj = work.join(format!("{name}.obj"));
+            write_obj(&level, args.single_mesh, &obj)?;
+            let views = viewpoints(&level);
+            (Scene::load(&obj)?.0, Some(level), views)
+        } else {
+            let scene = Scene::load(path)?.0;
+            let views = standing(&scene, args.cell_size, args.viewpoints)?;
+            (scene, None, views)
+        };
         scene.grid = Some(scene.view_grid(None, None, Some(args.cell_size), EyeHeights::default())?);
         for &parts in &args.objects {
-            let row = measure(&args, &level, &name, &scene, parts, &work, &mut csv)?;
+            let row = measure(&args, level.as_ref(), &views, &name, &scene, parts, &work, &mut csv)?;
             print_level(&row);
             rows.push(row);
         }
@@ -128,13 +152,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         write_svg(path, "level-corpus", &[panel], 1)?;
         println!("chart: {}", path.display());
     }
+    if let Some(bound) = args.check {
+        for r in &rows {
+            let worst = r.answered.iter().map(|m| m[4]).fold(0.0, f64::max);
+            if r.viewpoints == 0 || r.refused > 0 || worst > bound {
+                let why = format!(
+                    "{} (--objects {}): {} of {} viewpoints refused, worst wrong share {worst:.1e} (bound {bound:.0e})",
+                    r.name, r.parts, r.refused, r.viewpoints
+                );
+                return Err(why.into());
+            }
+        }
+        println!("check: every place a player stands answered, no view wrong by more than {bound:.0e}");
+    }
     Ok(())
 }
 
 /// Builds `scene` with `parts` and asks it from every place a player stands in `level`.
+#[allow(clippy::too_many_arguments)]
 fn measure(
     args: &Args,
-    level: &Level,
+    level: Option<&Level>,
+    views: &[(String, Vec3)],
     name: &str,
     scene: &Scene,
     parts: ObjectParts,
@@ -146,6 +185,7 @@ fn measure(
         visibility: Some(VisibilityParams {
             resolution: args.resolution,
             backend: BackendKind::Cpu,
+            sampling: args.samples.unwrap_or_default(),
             ..Default::default()
         }),
         ..Default::default()
@@ -164,11 +204,10 @@ fn measure(
     let cube = truth.cube_map().clone();
     let mut ids = IdCube::new(args.truth);
 
-    let views = viewpoints(level);
     let mut row = LevelRow {
         name: name.to_string(),
         parts,
-        triangles: level.triangles.len(),
+        triangles: scene.triangle_count() as usize,
         objects: measured.objects.len(),
         cells: grid.present_count(),
         lattice: grid.cell_count(),
@@ -178,7 +217,7 @@ fn measure(
         answered: Vec::new(),
     };
     for (k, (class, eye)) in views.iter().enumerate() {
-        let pvs = level.cluster_at(*eye).map_or(f64::NAN, |c| level.pvs_triangles(c) as f64);
+        let pvs = level.and_then(|l| l.cluster_at(*eye).map(|c| l.pvs_triangles(c) as f64)).unwrap_or(f64::NAN);
         let answer = db.query(*eye, &QueryParams::default());
         let naive = db.query(*eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() });
         let (Ok(answer), Ok(naive)) = (answer, naive) else {
@@ -191,7 +230,11 @@ fn measure(
         truth.render_ids(*eye, &mut ids)?;
         let seen: HashSet<u32> = (0..ids.ids.len()).filter_map(|t| ids.object_at(t)).collect();
         let has: HashSet<u32> = naive.items.iter().filter(|i| i.kind == ItemKind::Object).map(|i| i.id).collect();
-        let wrong = wrong_share(&ids, &cube, |t| has.contains(&parent[t as usize])).share();
+        let lacking = wrong_share(&ids, &cube, |t| has.contains(&parent[t as usize]));
+        let wrong = lacking.share();
+        if args.explain.is_some_and(|bound| wrong > bound) {
+            explain(&measured, &grid, *eye, &lacking, &parent);
+        }
         let faces = |a: &hdov::Answer| a.items.iter().map(|i| f64::from(i.faces)).sum::<f64>();
         let m = [faces(&answer), faces(&naive), pvs, seen.len() as f64, wrong];
         if let Some(f) = csv {
@@ -204,6 +247,42 @@ fn measure(
         row.answered.push(m);
     }
     Ok(row)
+}
+
+/// The objects a viewpoint's answer lacks, most of the view first: name, part, box and its
+/// distance from the eye, and the viewpoint's cell.
+fn explain(
+    scene: &Scene,
+    grid: &hdov::ViewGrid,
+    eye: Vec3,
+    lacking: &hdov_testkit::view_error::WrongShare,
+    parent: &[u32],
+) {
+    let mut by_object: std::collections::HashMap<u32, f64> = Default::default();
+    for &(t, w) in &lacking.missing {
+        *by_object.entry(parent[t as usize]).or_default() += w / lacking.seen;
+    }
+    let mut worst: Vec<(u32, f64)> = by_object.into_iter().collect();
+    worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let cell = grid.cell_of(eye).map(|c| grid.cell_box(c));
+    println!(
+        "  {:?} (cell {:?}) wrong {:.1e}:",
+        eye.to_array(),
+        cell.map(|b| [b.min.to_array(), b.max.to_array()]),
+        lacking.share()
+    );
+    for (o, share) in worst.iter().take(4) {
+        let b = scene.object_bounds(*o as usize);
+        let object = &scene.objects[*o as usize];
+        let gap = (b.min - eye).max(eye - b.max).max(Vec3::ZERO).length();
+        println!(
+            "    {share:.1e} {} part {:?}, box {:?}–{:?}, {gap:.2} m away",
+            object.name,
+            object.part,
+            b.min.to_array(),
+            b.max.to_array()
+        );
+    }
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -247,12 +326,17 @@ fn print_table(rows: &[LevelRow]) {
     }
 }
 
-/// The level as an OBJ file: one group per shader.
-fn write_obj(level: &Level, path: &std::path::Path) -> std::io::Result<()> {
+/// The level as an OBJ file: one group per shader, or one group in all.
+fn write_obj(level: &Level, single: bool, path: &std::path::Path) -> std::io::Result<()> {
     let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
     let mut next = 1usize;
+    if single {
+        writeln!(out, "g level")?;
+    }
     for (shader, triangles) in level.by_shader() {
-        writeln!(out, "g {}", shader.replace(char::is_whitespace, "_"))?;
+        if !single {
+            writeln!(out, "g {}", shader.replace(char::is_whitespace, "_"))?;
+        }
         for t in &triangles {
             for v in t {
                 writeln!(out, "v {} {} {}", v.x, v.y, v.z)?;
@@ -277,6 +361,22 @@ fn per_triangle(scene: &Scene) -> (Scene, Vec<u32>) {
         }
     }
     (out, parent)
+}
+
+/// `n` places to stand in `scene`, eyes 1.6 up: floors the build's lines find (cells
+/// `cell_size` wide) with room for the eye, drawn at random (seed 1), named by their floor.
+fn standing(scene: &Scene, cell_size: f32, n: usize) -> Result<Vec<(String, Vec3)>, Box<dyn std::error::Error>> {
+    const EYE: f32 = 1.6;
+    let floors = scene.floors(cell_size, EyeHeights::default())?;
+    let roomy: Vec<Vec3> =
+        floors.found.iter().filter(|f| f.ceiling - f.at.y > EYE + 0.1).map(|f| f.at + Vec3::Y * EYE).collect();
+    let mut rng = hdov_testkit::scenes::Rng(1);
+    Ok((0..n.min(roomy.len()))
+        .map(|_| {
+            let k = ((rng.next_f32() * roomy.len() as f32) as usize).min(roomy.len() - 1);
+            (format!("floor {:.1}", roomy[k].y - EYE), roomy[k])
+        })
+        .collect())
 }
 
 /// Where players stand, eyes up: each place dropped onto the highest floor (a triangle facing up)
