@@ -49,6 +49,9 @@ fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
     assert_eq!(g.cell_size(), Vec3::new(2.0, 1.0, 2.0));
     let layer = |y: u32| g.present_ids().filter(|&id| g.cell_coords(id)[1] == y).count();
     assert_eq!((0..g.dims[1]).map(layer).collect::<Vec<_>>(), vec![21, 0, 0, 25, 25, 0, 25, 25]);
+    // Cells are not yet cut at walls: the four ground-floor cells the partition runs through
+    // hold both rooms (the fifth has the door, which joins them).
+    assert_eq!(scene.cells_across_walls(2.0, EyeHeights::default()).unwrap(), (4, 121));
     // A cell marked from a floor never reaches below it: every cell's bottom is at or above
     // the ground floor, and none spans the upper floor's slab (3.0–3.3).
     for id in g.present_ids() {

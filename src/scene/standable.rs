@@ -156,11 +156,7 @@ impl Scene {
     /// and when the lattice would pass [`ViewGrid::MAX_CELLS`].
     pub fn standable_grid(&self, cell_size: f32, eyes: EyeHeights) -> Result<ViewGrid> {
         let Floors { origin, columns: [cx, cz], found: floors } = self.floors(cell_size, eyes)?;
-        // Layers start at the lowest eye, at most the lowest eye height tall.
-        let layer = cell_size.min(eyes.low);
-        let y0 = floors.iter().map(|f| f.at.y).fold(f32::INFINITY, f32::min) + eyes.low;
-        let top = floors.iter().map(|f| f.at.y + (f.ceiling - f.at.y).min(eyes.high)).fold(f32::NEG_INFINITY, f32::max);
-        let ny = ((f64::from(top - y0) / f64::from(layer)).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32;
+        let layers @ Layers { y0, height: layer, count: ny } = Layers::of(&floors, cell_size, eyes);
         let dims = [cx, ny, cz];
         let region = Aabb::new(
             Vec3::new(origin.x, y0, origin.z),
@@ -175,21 +171,30 @@ impl Scene {
             return Err(Error::bad_param(Param::CellSize, reason));
         }
         let mut grid = ViewGrid::new(region, dims);
-        let mut ids = Vec::new();
-        for f in &floors {
-            let [x, z] = f.column;
-            let low = f.at.y + eyes.low;
-            let high = (f.at.y + eyes.high).min(f.ceiling);
-            // Eyes from `low` up to, not including, `high`: a band that ends on a layer's
-            // bottom does not reach into it.
-            let first = (((low - y0) / layer).floor().max(0.0) as u32).min(ny - 1);
-            let end = (((high - y0) / layer).ceil().max(1.0) as u32).min(ny);
-            for y in first..end.max(first + 1) {
-                ids.push(grid.cell_id([x, y, z]) as u32);
-            }
-        }
+        let ids = floors.iter().flat_map(|f| eye_cells(&grid, layers, f, eyes)).map(|id| id as u32).collect();
         grid.present = Some(CellSet::from_ids(ids));
         Ok(grid)
+    }
+
+    /// Of the view cells [`Scene::standable_grid`] makes, how many hold places to stand in two
+    /// or more parts that no line between them joins (4-neighbours of its 8 × 8 lines): a wall,
+    /// a pillar or a drop through the cell, so that the cell's answer mixes what both parts see.
+    /// Returns (such cells, view cells). A measure of what cutting cells at walls would change.
+    pub fn cells_across_walls(&self, cell_size: f32, eyes: EyeHeights) -> Result<(usize, usize)> {
+        let grid = self.standable_grid(cell_size, eyes)?;
+        let floors = self.floors(cell_size, eyes)?;
+        let layers = Layers::of(&floors.found, cell_size, eyes);
+        let spacing = cell_size / LINES_PER_CELL as f32;
+        let mut lines: std::collections::HashMap<usize, u64> = std::collections::HashMap::new();
+        for f in &floors.found {
+            let local = |v: f32, o: f32| (((v - o) / spacing).floor() as i64).rem_euclid(i64::from(LINES_PER_CELL)) as u32;
+            let bit = 1u64 << (local(f.at.z, floors.origin.z) * LINES_PER_CELL + local(f.at.x, floors.origin.x));
+            for id in eye_cells(&grid, layers, f, eyes) {
+                *lines.entry(id).or_default() |= bit;
+            }
+        }
+        let split = lines.values().filter(|&&m| parts_of(m) > 1).count();
+        Ok((split, grid.present_count()))
     }
 
     /// Where each vertical line of the lattice `origin + (i + ½, ·, k + ½) · spacing`,
@@ -228,6 +233,63 @@ impl Scene {
         out.sort_unstable_by(|p, q| p.0.cmp(&q.0).then(p.1.total_cmp(&q.1)));
         out
     }
+}
+
+/// The layers of a standable grid: from the lowest eye up, at most the lowest eye height tall
+/// (so that a cell marked from a floor never reaches below it), to the highest eye.
+#[derive(Clone, Copy)]
+struct Layers {
+    y0: f32,
+    height: f32,
+    count: u32,
+}
+
+impl Layers {
+    fn of(floors: &[Floor], cell_size: f32, eyes: EyeHeights) -> Layers {
+        let height = cell_size.min(eyes.low);
+        let y0 = floors.iter().map(|f| f.at.y).fold(f32::INFINITY, f32::min) + eyes.low;
+        let top = floors.iter().map(|f| f.at.y + (f.ceiling - f.at.y).min(eyes.high)).fold(f32::NEG_INFINITY, f32::max);
+        let count = ((f64::from(top - y0) / f64::from(height)).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32;
+        Layers { y0, height, count }
+    }
+}
+
+/// The cells of `grid` (a standable grid with `layers`) that the eye band of floor `f` meets:
+/// eyes from `low` up to, not including, `high`, so that a band ending on a layer's bottom does
+/// not reach into it (the layers' own numbers, not the grid's box divided again, which would
+/// reach into it by a rounding).
+fn eye_cells<'g>(grid: &'g ViewGrid, layers: Layers, f: &Floor, eyes: EyeHeights) -> impl Iterator<Item = usize> + 'g {
+    let Layers { y0, height: layer, count: ny } = layers;
+    let low = f.at.y + eyes.low;
+    let high = (f.at.y + eyes.high).min(f.ceiling);
+    let first = (((low - y0) / layer).floor().max(0.0) as u32).min(ny - 1);
+    let end = (((high - y0) / layer).ceil().max(1.0) as u32).min(ny);
+    let [x, z] = f.column;
+    (first..end.max(first + 1)).map(move |y| grid.cell_id([x, y, z]))
+}
+
+/// Parts of an 8 × 8 mask of lines (bit `z · 8 + x`) that 4-neighbours join.
+fn parts_of(mask: u64) -> u32 {
+    let (mut left, mut parts) = (mask, 0);
+    while left != 0 {
+        let mut part = left & left.wrapping_neg();
+        loop {
+            // Grow by one step along x (not across a row's end) and z.
+            let grown = part
+                | ((part << 1) & !0x0101_0101_0101_0101)
+                | ((part >> 1) & !0x8080_8080_8080_8080)
+                | (part << 8)
+                | (part >> 8);
+            let grown = grown & mask;
+            if grown == part {
+                break;
+            }
+            part = grown;
+        }
+        left &= !part;
+        parts += 1;
+    }
+    parts
 }
 
 /// The height of triangle `t` over `(x, z)`, if its footprint holds the point (edges included).
@@ -273,6 +335,20 @@ fn floors(crossings: &[(u32, f32, f32)], eyes: EyeHeights) -> Vec<(u32, f32, f32
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parts_of_a_mask_of_lines() {
+        assert_eq!(parts_of(0), 0);
+        assert_eq!(parts_of(u64::MAX), 1);
+        // Columns 0–2 and 4–7 of every row: a wall at column 3.
+        let row = 0b1111_0111u64;
+        assert_eq!(parts_of((0..8).fold(0, |m, z| m | row << (8 * z))), 2);
+        // The same with a door in row 5.
+        assert_eq!(parts_of((0..8).fold(0, |m, z| m | row << (8 * z)) | 1 << (5 * 8 + 3)), 1);
+        // Bit 7 of a row and bit 0 of the next are not neighbours.
+        assert_eq!(parts_of(1 << 7 | 1 << 8), 2);
+        assert_eq!(parts_of(1 << 7 | 1 << 15), 1);
+    }
 
     #[test]
     fn heights_over_a_triangle_and_off_it() {

@@ -4,10 +4,14 @@
 //! where a viewer can stand, the default sampler, CPU backend), and asked from every place a
 //! player stands (spawn points and pick-ups, dropped to the floor, eyes 50 units up).
 //!
+//! Any other scene hdov reads (a building's OBJ from `tools/corpus/fzk-haus.sh`) is asked from
+//! `--viewpoints` floors that the build's lines find, eyes 1.6 up, and has no PVS to compare.
+//!
 //! ```sh
 //! tools/corpus/openarena.sh            # levels into tools/corpus/data/ (not in git)
 //! cargo run --release -p hdov-tools --bin level-corpus -- tools/corpus/data/oa_dm1.bsp \
-//!     [--cell-size 2] [--objects file] [--resolution 128] [--truth 256] [--csv OUT] [--chart OUT.svg]
+//!     [--cell-size 2] [--objects file,geometry] [--samples S] [--single-mesh] [--resolution 128]
+//!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
 //! ```
 //!
 //! Per level: build seconds and view cells; per viewpoint whether it is refused; the faces of
@@ -129,6 +133,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (scene, None, views)
         };
         scene.grid = Some(scene.view_grid(None, None, Some(args.cell_size), EyeHeights::default())?);
+        let (across, cells) = scene.cells_across_walls(args.cell_size, EyeHeights::default())?;
+        println!("{name}: {across} of {cells} view cells hold places to stand on both sides of a wall");
         for &parts in &args.objects {
             let row = measure(&args, level.as_ref(), &views, &name, &scene, parts, &work, &mut csv)?;
             print_level(&row);
