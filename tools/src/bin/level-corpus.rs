@@ -32,8 +32,8 @@ use glam::Vec3;
 use hdov::dov::IdCube;
 use hdov::scene::standable::height_at;
 use hdov::{
-    BackendKind, BuildParams, Database, EyeHeights, ItemKind, Mode, ObjectParts, Overwrite, Progress, QueryParams,
-    Sampling, Scene, VisibilityParams,
+    BackendKind, BuildParams, Database, EyeHeights, FloorTest, ItemKind, Mode, ObjectParts, Overwrite, Progress,
+    QueryParams, Sampling, Scene, VisibilityParams,
 };
 use hdov_testkit::view_error::wrong_share;
 use hdov_tools::corpus::bsp::{EYE_UNITS, Level, METRES_PER_UNIT};
@@ -60,6 +60,9 @@ struct Args {
     /// `hdov build --samples` (default: the build's, region rays).
     #[arg(long)]
     samples: Option<Sampling>,
+    /// `hdov build --zero-dov-floor`, comma-separated (`none`: no floor; default: the build's).
+    #[arg(long, value_delimiter = ',')]
+    zero_dov_floor: Vec<String>,
     /// `hdov build --resolution`.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
@@ -192,6 +195,7 @@ fn measure(
             resolution: args.resolution,
             backend: BackendKind::Cpu,
             sampling: args.samples.unwrap_or_default(),
+            zero_dov_floor: floors(&args.zero_dov_floor)?,
             ..Default::default()
         }),
         ..Default::default()
@@ -289,6 +293,14 @@ fn explain(
             b.max.to_array()
         );
     }
+}
+
+/// The floor tests named (`none`: none), or the build's default without a name.
+fn floors(names: &[String]) -> Result<Vec<FloorTest>, Box<dyn std::error::Error>> {
+    if names.is_empty() {
+        return Ok(VisibilityParams::default().zero_dov_floor);
+    }
+    Ok(names.iter().filter(|n| *n != "none").map(|n| n.parse::<FloorTest>()).collect::<Result<_, _>>()?)
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
