@@ -20,7 +20,15 @@ pub struct ViewGrid {
     /// The cells that are view cells; `None`: all of them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub present: Option<CellSet>,
+    /// With `present`, per view cell in ascending id order, where in it a viewer can stand: bit
+    /// `z · 8 + x` of the 8 × 8 squares of its footprint (`LINES_PER_CELL` of `scene::standable`)
+    /// is set where a floor's eyes reach the cell there. `None`: anywhere in the cell.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub places: Option<Vec<u64>>,
 }
+
+/// Squares per cell edge of [`ViewGrid::places`].
+pub const PLACES_PER_EDGE: u32 = 8;
 
 /// A set of cell ids, as sorted runs `[first, end)`: the view cells of a sparse grid (a storey
 /// is a few runs per row of cells).
@@ -54,6 +62,13 @@ impl CellSet {
     /// The ids, ascending.
     pub fn ids(&self) -> impl Iterator<Item = usize> + '_ {
         self.runs.iter().flat_map(|r| r[0] as usize..r[1] as usize)
+    }
+
+    /// How many ids of the set are below `id`: `id`'s place among them when it is one.
+    pub fn rank(&self, id: usize) -> usize {
+        let i = self.runs.partition_point(|r| (r[1] as usize) <= id);
+        let before: usize = self.runs[..i].iter().map(|r| (r[1] - r[0]) as usize).sum();
+        before + self.runs.get(i).map_or(0, |r| id.saturating_sub(r[0] as usize))
     }
 
     /// How many ids.
@@ -100,7 +115,7 @@ impl ViewGrid {
 
     /// A grid of `dims` cells (x, y, z) over `region`, every cell a view cell.
     pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
-        Self { region, dims, present: None }
+        Self { region, dims, present: None, places: None }
     }
 
     /// The grid a build uses. Region: `region`, else the scene's own grid's, else the footprint
@@ -165,7 +180,26 @@ impl ViewGrid {
                 return Err("the grid has no view cell".into());
             }
         }
-        Ok(())
+        match (&self.places, &self.present) {
+            (Some(p), Some(set)) if p.len() != set.len() => {
+                Err(format!("{} places for {} view cells", p.len(), set.len()))
+            }
+            (Some(_), None) => Err("places to stand without view cells".into()),
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether a viewer can stand at `p`'s square of view cell `id` (`c` its coordinates):
+    /// always in a grid without [`ViewGrid::places`].
+    pub fn can_stand(&self, id: usize, c: [u32; 3], p: Vec3) -> bool {
+        let (Some(places), Some(set)) = (&self.places, &self.present) else { return true };
+        let Some(&mask) = places.get(set.rank(id)) else { return false };
+        let b = self.cell_box(c);
+        let square = |a: usize| {
+            let f = ((p[a] - b.min[a]) / b.extent()[a] * PLACES_PER_EDGE as f32).floor();
+            if f.is_finite() { (f.max(0.0) as u32).min(PLACES_PER_EDGE - 1) } else { 0 }
+        };
+        mask >> (square(2) * PLACES_PER_EDGE + square(0)) & 1 == 1
     }
 
     /// Whether cell `id` is a view cell.
@@ -330,6 +364,17 @@ mod tests {
         assert!(g.check().is_ok());
         assert_eq!(g.present_ids().collect::<Vec<_>>(), vec![3, 4, 5, 7, 9]);
         assert!(g.is_present(9) && !g.is_present(8) && !g.is_present(16));
+        let set = g.present.clone().unwrap();
+        assert_eq!([3, 5, 7, 9, 10].map(|id| set.rank(id)), [0, 2, 3, 4, 5]);
+        // Places: cell 3 only in its x < ½ half, the others everywhere.
+        let half = (0..8).fold(0u64, |m, z| m | 0x0f << (8 * z));
+        g.places = Some(vec![half, !0, !0, !0, !0]);
+        assert!(g.check().is_ok());
+        let c = g.cell_coords(3);
+        assert!(g.can_stand(3, c, Vec3::new(3.2, 1.0, 0.5)) && !g.can_stand(3, c, Vec3::new(3.7, 1.0, 0.5)));
+        g.places = Some(vec![!0; 4]);
+        assert!(g.check().is_err());
+        g.places = None;
         let json = serde_json::to_string(&g).unwrap();
         assert!(json.contains("\"present\":[[3,6],[7,8],[9,10]]"), "{json}");
         assert_eq!(serde_json::from_str::<ViewGrid>(&json).unwrap(), g);

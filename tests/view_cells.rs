@@ -28,6 +28,10 @@ const STANDING: [[f32; 3]; 9] = [
 /// eye heights.
 const SOLID_OR_AIR: [[f32; 3]; 4] = [[7.5, 1.6, 7.5], [2.0, 3.15, 2.0], [5.0, -0.15, 5.0], [5.0, 9.5, 5.0]];
 
+/// Inside walls 0.3 m thick, in cells where people stand beside them: the outer walls on both
+/// storeys and the partition.
+const IN_WALLS: [[f32; 3]; 4] = [[0.15, 1.5, 5.0], [5.0, 1.5, 2.0], [9.85, 4.8, 3.0], [3.0, 4.8, 0.12]];
+
 fn grid(scene: &Scene) -> hdov::ViewGrid {
     scene.view_grid(None, None, Some(2.0), EyeHeights::default()).unwrap()
 }
@@ -42,6 +46,16 @@ fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
     }
     for p in SOLID_OR_AIR {
         assert!(!present(p), "{p:?} is inside a solid or out of reach, but in a view cell");
+    }
+    let stands = |p: [f32; 3]| {
+        let c = g.cell_of(Vec3::from(p)).unwrap();
+        g.can_stand(g.cell_id(c), c, Vec3::from(p))
+    };
+    for p in STANDING {
+        assert!(stands(p), "{p:?} is where a person stands, but refused within its cell");
+    }
+    for p in IN_WALLS {
+        assert!(present(p) && !stands(p), "{p:?} is inside a wall");
     }
     // Cells are 2 m wide and one eye height (1 m) tall. On the ground floor (eyes 1–2 m: one
     // layer) the core and the walls around it fill 4 of the 25 columns; upstairs (eyes at
@@ -120,4 +134,8 @@ fn both_storeys_answer_and_a_solid_is_refused() {
     }
     let e = db.query(Vec3::new(7.5, 1.6, 7.5), &naive).unwrap_err().to_string();
     assert!(e.contains("is in no view cell"), "{e}");
+    for p in IN_WALLS {
+        let e = db.query(Vec3::from(p), &naive).unwrap_err().to_string();
+        assert!(e.contains("inside a wall") && !e.contains('\n'), "{p:?}: {e}");
+    }
 }

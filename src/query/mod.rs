@@ -368,7 +368,8 @@ impl Database {
     }
 
     /// The view cell holding `at` (points on an inner cell border belong to the upper cell);
-    /// refused outside the grid and in a cell that is not a view cell.
+    /// refused outside the grid, in a cell that is not a view cell, and where in its cell no
+    /// viewer stands (an eighth of a cell's footprint at a time: inside a wall).
     pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
         let grid =
             self.grid().ok_or_else(|| Error::bad_param(Param::At, format!("{} holds no grid", self.dir().display())))?;
@@ -382,6 +383,13 @@ impl Database {
         if !grid.is_present(id) {
             let reason = format!(
                 "{:?} is in no view cell: this database has cells only where a viewer can stand (eye height above a floor, in empty space), and cell {cell:?} is not one",
+                at.to_array()
+            );
+            return Err(Error::bad_param(Param::At, reason));
+        }
+        if !grid.can_stand(id, cell, at) {
+            let reason = format!(
+                "{:?} is where no viewer stands in cell {cell:?}: inside a wall or a solid, or with no floor an eye height below",
                 at.to_array()
             );
             return Err(Error::bad_param(Param::At, reason));

@@ -6,11 +6,14 @@
 //! ([`ViewGrid::present`]).
 //!
 //! Vertical lines through the scene, 8 × 8 per cell column, meet the triangles above and below;
-//! a surface facing up within 45° of the vertical is a floor where it leaves no solid around
-//! (counting the undersides entered and the tops left on the way up: a box standing on a floor
-//! hides that floor) and has room for the lowest eye height up to the next surface (a ceiling, or
-//! none: the sky). Each floor's band of eye heights marks the cells it meets. Layers of cells are at most the lowest eye height tall, so that a cell marked from a
-//! floor never reaches below it into the storey underneath.
+//! a surface facing up within 45° of the vertical is a floor where nothing covers it (a box
+//! standing on it), the next surface above faces down (a ceiling) or there is none (the sky), and
+//! there is room for the lowest eye height between ([`floors`]). Each floor's band of eye heights
+//! marks the cells it meets, and in each cell the eighth of its footprint (a *place*,
+//! [`ViewGrid::places`]) around the line, and the places around it that are open air from the
+//! floor up to the highest eye (a viewer at the edge of a hole or a drop leans over it; a wall
+//! standing on the floor is not open). Layers of cells are at most the lowest eye height tall, so
+//! that a cell marked from a floor never reaches below it into the storey underneath.
 
 use glam::Vec3;
 
@@ -21,7 +24,7 @@ use crate::grid::{CellSet, ViewGrid};
 
 /// Vertical lines per cell edge (8 × 8 per cell column): floors narrower than an eighth of a cell
 /// (a ledge, a step's nose) may go unseen.
-const LINES_PER_CELL: u32 = 8;
+const LINES_PER_CELL: u32 = crate::grid::PLACES_PER_EDGE;
 
 /// A floor faces up within 45° of the vertical (steeper is a wall or a ramp no one stands on).
 const FLOOR_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
@@ -71,12 +74,34 @@ pub struct Floors {
 /// A floor where a vertical line crosses it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Floor {
-    /// The column of cells (x, z) the line is in.
-    pub column: [u32; 2],
+    /// The line (x, z) among all the scene's lines.
+    pub line: [u32; 2],
     /// The point on the floor.
     pub at: Vec3,
     /// The height of the next surface above (+∞: none).
     pub ceiling: f32,
+    /// Bit `b` set: the neighbouring line [`NEIGHBOURS`]`[b]` is open air from this floor up
+    /// to its highest eye, so a viewer standing at the floor's edge may have their eyes there.
+    pub reach: u8,
+}
+
+/// The 8 neighbouring lines of a line, `[dx, dz]`.
+pub const NEIGHBOURS: [[i64; 2]; 8] = [[-1, -1], [0, -1], [1, -1], [-1, 0], [1, 0], [-1, 1], [0, 1], [1, 1]];
+
+impl Floor {
+    /// The lines where a viewer standing on this floor may have their eyes: its own and the
+    /// open neighbours ([`Floor::reach`]).
+    pub fn eye_lines(&self) -> impl Iterator<Item = [u32; 2]> + '_ {
+        let own = std::iter::once(self.line);
+        let [i, k] = self.line.map(i64::from);
+        own.chain(
+            NEIGHBOURS
+                .iter()
+                .enumerate()
+                .filter(move |(b, _)| self.reach >> b & 1 == 1)
+                .map(move |(_, [di, dk])| [(i + di) as u32, (k + dk) as u32]),
+        )
+    }
 }
 
 impl Scene {
@@ -133,12 +158,33 @@ impl Scene {
         let spacing = cell_size / LINES_PER_CELL as f32;
         let origin = bounds.min;
         let crossings = self.crossings(origin, spacing, [lines_x, cz * LINES_PER_CELL]);
+        let lines_z = cz * LINES_PER_CELL;
+        // The crossings of line `l`.
+        let of_line = |l: u32| {
+            let start = crossings.partition_point(|c| c.0 < l);
+            &crossings[start..start + crossings[start..].partition_point(|c| c.0 == l)]
+        };
         let found: Vec<Floor> = floors(&crossings, eyes)
             .into_iter()
             .map(|(line, y, ceiling)| {
                 let (i, k) = (line % lines_x, line / lines_x);
                 let at = Vec3::new(origin.x + (i as f32 + 0.5) * spacing, y, origin.z + (k as f32 + 0.5) * spacing);
-                Floor { column: [i / LINES_PER_CELL, k / LINES_PER_CELL], at, ceiling }
+                // The neighbouring lines with nothing from this floor up to the highest eye:
+                // open air (the edge of a hole, a drop) that a viewer at the edge leans over.
+                // A wall standing on the floor has its underside there and is not reached.
+                let mut reach = 0u8;
+                for (bit, [di, dk]) in NEIGHBOURS.iter().enumerate() {
+                    let (ni, nk) = (i as i64 + di, k as i64 + dk);
+                    if ni < 0 || nk < 0 || ni >= i64::from(lines_x) || nk >= i64::from(lines_z) {
+                        continue;
+                    }
+                    let hair = 1e-4 * eyes.low.max(y.abs() * 1e-3);
+                    let top = y + eyes.high.min(ceiling - y);
+                    if !of_line(nk as u32 * lines_x + ni as u32).iter().any(|c| c.1 > y - hair && c.1 < top) {
+                        reach |= 1 << bit;
+                    }
+                }
+                Floor { line: [i, k], at, ceiling, reach }
             })
             .collect();
         if found.is_empty() {
@@ -171,8 +217,18 @@ impl Scene {
             return Err(Error::bad_param(Param::CellSize, reason));
         }
         let mut grid = ViewGrid::new(region, dims);
-        let ids = floors.iter().flat_map(|f| eye_cells(&grid, layers, f, eyes)).map(|id| id as u32).collect();
-        grid.present = Some(CellSet::from_ids(ids));
+        // Per cell its squares where a floor's eyes reach it, one line each.
+        let mut places: std::collections::BTreeMap<usize, u64> = Default::default();
+        for f in &floors {
+            for [i, k] in f.eye_lines() {
+                let bit = 1u64 << ((k % LINES_PER_CELL) * LINES_PER_CELL + i % LINES_PER_CELL);
+                for id in eye_cells(&grid, layers, f, [i / LINES_PER_CELL, k / LINES_PER_CELL], eyes) {
+                    *places.entry(id).or_default() |= bit;
+                }
+            }
+        }
+        grid.present = Some(CellSet::from_ids(places.keys().map(|&id| id as u32).collect()));
+        grid.places = Some(places.into_values().collect());
         Ok(grid)
     }
 
@@ -182,19 +238,8 @@ impl Scene {
     /// Returns (such cells, view cells). A measure of what cutting cells at walls would change.
     pub fn cells_across_walls(&self, cell_size: f32, eyes: EyeHeights) -> Result<(usize, usize)> {
         let grid = self.standable_grid(cell_size, eyes)?;
-        let floors = self.floors(cell_size, eyes)?;
-        let layers = Layers::of(&floors.found, cell_size, eyes);
-        let spacing = cell_size / LINES_PER_CELL as f32;
-        let mut lines: std::collections::HashMap<usize, u64> = std::collections::HashMap::new();
-        for f in &floors.found {
-            let local = |v: f32, o: f32| (((v - o) / spacing).floor() as i64).rem_euclid(i64::from(LINES_PER_CELL)) as u32;
-            let bit = 1u64 << (local(f.at.z, floors.origin.z) * LINES_PER_CELL + local(f.at.x, floors.origin.x));
-            for id in eye_cells(&grid, layers, f, eyes) {
-                *lines.entry(id).or_default() |= bit;
-            }
-        }
-        let split = lines.values().filter(|&&m| parts_of(m) > 1).count();
-        Ok((split, grid.present_count()))
+        let places = grid.places.as_deref().unwrap_or_default();
+        Ok((places.iter().filter(|&&m| parts_of(m) > 1).count(), grid.present_count()))
     }
 
     /// Where each vertical line of the lattice `origin + (i + ½, ·, k + ½) · spacing`,
@@ -254,17 +299,24 @@ impl Layers {
     }
 }
 
-/// The cells of `grid` (a standable grid with `layers`) that the eye band of floor `f` meets:
+/// The cells of `grid` (a standable grid with `layers`) in `column` that the eye band of floor
+/// `f` meets:
 /// eyes from `low` up to, not including, `high`, so that a band ending on a layer's bottom does
 /// not reach into it (the layers' own numbers, not the grid's box divided again, which would
 /// reach into it by a rounding).
-fn eye_cells<'g>(grid: &'g ViewGrid, layers: Layers, f: &Floor, eyes: EyeHeights) -> impl Iterator<Item = usize> + 'g {
+fn eye_cells<'g>(
+    grid: &'g ViewGrid,
+    layers: Layers,
+    f: &Floor,
+    column: [u32; 2],
+    eyes: EyeHeights,
+) -> impl Iterator<Item = usize> + 'g {
     let Layers { y0, height: layer, count: ny } = layers;
     let low = f.at.y + eyes.low;
     let high = (f.at.y + eyes.high).min(f.ceiling);
     let first = (((low - y0) / layer).floor().max(0.0) as u32).min(ny - 1);
     let end = (((high - y0) / layer).ceil().max(1.0) as u32).min(ny);
-    let [x, z] = f.column;
+    let [x, z] = column;
     (first..end.max(first + 1)).map(move |y| grid.cell_id([x, y, z]))
 }
 
@@ -292,39 +344,55 @@ fn parts_of(mask: u64) -> u32 {
     parts
 }
 
-/// The height of triangle `t` over `(x, z)`, if its footprint holds the point (edges included).
+/// The height of triangle `t` over `(x, z)`, if its footprint holds the point, edges included
+/// with a margin of [`EDGE`]: a line through the shared edge of two triangles (the diagonal of a
+/// quad, met exactly by lines on a regular spacing) must not fall through the crack that rounding
+/// opens between them. Both then report it; `floors` counts one surface.
 pub fn height_at(t: [Vec3; 3], x: f32, z: f32) -> Option<f32> {
     let [a, b, c] = t;
     let d = (b.x - a.x) * (c.z - a.z) - (c.x - a.x) * (b.z - a.z);
     let u = ((b.x - x) * (c.z - z) - (c.x - x) * (b.z - z)) / d;
     let v = ((c.x - x) * (a.z - z) - (a.x - x) * (c.z - z)) / d;
     let w = 1.0 - u - v;
-    (u >= 0.0 && v >= 0.0 && w >= 0.0).then_some(u * a.y + v * b.y + w * c.y)
+    (u >= -EDGE && v >= -EDGE && w >= -EDGE).then_some(u * a.y + v * b.y + w * c.y)
 }
 
+/// How far outside a triangle, in barycentric units, a line still meets it.
+const EDGE: f32 = 1e-5;
+
 /// The floors along the lines: `(line, floor height, height of the next surface above or +∞)`.
-/// Going up a line, a surface facing down is entered (the underside of a solid) and one facing
-/// up is left (its top), so that a count of solids entered says whether a height is in empty
-/// space; it never drops below zero, as files that hold only the surfaces seen from inside a
-/// level (a BSP export) give no undersides. Crossings within a hair of each other are one
-/// surface (a slab drawn from both sides, a box standing on a floor): entries before exits. A
-/// floor is such a surface that faces up within 45°, leaves the count at zero, and has at
-/// least `eyes.low` of room to the next surface above.
+/// Crossings within a hair of each other are one surface (a line through the edge two
+/// triangles share meets both). A floor is a surface that faces up within 45°, that
+///
+/// - is not covered: nothing at its height faces down (a box standing on it, a wall's
+///   underside);
+/// - is not inside a solid: the next surface above faces down (a ceiling, an underside) or there
+///   is none (the sky); one that only faces up is the top of a solid this floor is inside;
+/// - has at least `eyes.low` of room up to that surface.
+///
+/// Nothing else is assumed of the meshes: a BSP export keeps only the faces seen from inside the
+/// level (no undersides where solids touch, several undersides under one top), a BIM export
+/// closed solids that touch. A slab drawn as one plane from both sides counts as covered.
 fn floors(crossings: &[(u32, f32, f32)], eyes: EyeHeights) -> Vec<(u32, f32, f32)> {
     let mut out = Vec::new();
     for line in crossings.chunk_by(|a, b| a.0 == b.0) {
-        let mut inside = 0u32;
+        // The surfaces along the line, bottom up: (height, faces up, faces down, a floor).
+        let mut surfaces: Vec<(f32, bool, bool, bool)> = Vec::new();
         let mut k = 0;
         while k < line.len() {
             let y = line[k].1;
             let hair = 1e-4 * eyes.low.max(y.abs() * 1e-3);
-            let group = line[k..].iter().take_while(|c| c.1 <= y + hair).count();
-            let surface = &line[k..k + group];
-            inside += surface.iter().filter(|c| c.2 < 0.0).count() as u32;
-            inside = inside.saturating_sub(surface.iter().filter(|c| c.2 > 0.0).count() as u32);
-            k += group;
-            let ceiling = line.get(k).map_or(f32::INFINITY, |c| c.1);
-            if inside == 0 && surface.iter().any(|c| c.2 >= FLOOR_COS) && ceiling - y >= eyes.low {
+            let group = &line[k..k + line[k..].iter().take_while(|c| c.1 <= y + hair).count()];
+            let up = group.iter().any(|c| c.2 > 0.0);
+            let down = group.iter().any(|c| c.2 < 0.0);
+            surfaces.push((y, up, down, group.iter().any(|c| c.2 >= FLOOR_COS)));
+            k += group.len();
+        }
+        for (n, &(y, _, down, floor)) in surfaces.iter().enumerate() {
+            let above = surfaces.get(n + 1);
+            let open = above.is_none_or(|a| a.2);
+            let ceiling = above.map_or(f32::INFINITY, |a| a.0);
+            if floor && !down && open && ceiling - y >= eyes.low {
                 out.push((line[0].0, y, ceiling));
             }
         }
@@ -356,6 +424,13 @@ mod tests {
         assert_eq!(height_at(t, 0.0, 0.0), Some(1.0));
         assert!((height_at(t, 1.0, 0.5).unwrap() - 2.0).abs() < 1e-6);
         assert_eq!(height_at(t, 1.5, 1.5), None);
+        // A quad's two triangles both meet a line through their shared diagonal.
+        let (p, q, r, s) = (Vec3::new(0.1, 0.0, 0.3), Vec3::new(0.7, 0.0, 0.3), Vec3::new(0.7, 0.0, 0.9), Vec3::new(0.1, 0.0, 0.9));
+        for k in 1..50 {
+            let f = k as f32 / 50.0;
+            let (x, z) = (0.1 + 0.6 * f, 0.3 + 0.6 * f);
+            assert!(height_at([p, q, r], x, z).is_some() || height_at([p, r, s], x, z).is_some(), "a crack at {x}, {z}");
+        }
     }
 
     #[test]
@@ -363,10 +438,10 @@ mod tests {
         let eyes = EyeHeights::default();
         let c = [
             // A floor (no underside, as a BSP export has it) under a ceiling 3 up, then a
-            // slab drawn from both sides at 3, floor over nothing.
+            // closed slab from 3 to 3.3 under the sky.
             (0, 0.0, 1.0),
             (0, 3.0, -1.0),
-            (0, 3.0, 1.0),
+            (0, 3.3, 1.0),
             // A closed slab whose top has a box standing on it up to a closed slab above: the
             // box's inside is no place to stand; the upper slab's top is, under the sky.
             (1, -0.3, -1.0),
@@ -382,8 +457,24 @@ mod tests {
             (3, 4.0, 0.9),
             (3, 4.0, 0.9),
             (4, 0.0, 0.6),
+            // A block's underside met on the edge its two triangles share, then its top.
+            (5, -0.5, -1.0),
+            (5, -0.5, -1.0),
+            (5, 0.0, 1.0),
+            // A BSP floor over three undersides of the room below (a light, a sloped trim, a
+            // panel) and under a ceiling: no solid's count may hide it.
+            (6, -2.0, 1.0),
+            (6, 2.5, -1.0),
+            (6, 2.875, -0.7),
+            (6, 3.0, -1.0),
+            (6, 4.0, 1.0),
+            (6, 8.0, -1.0),
         ];
         let found = floors(&c, eyes);
-        assert_eq!(found, vec![(0, 0.0, 3.0), (0, 3.0, f32::INFINITY), (1, 3.3, f32::INFINITY), (3, 4.0, f32::INFINITY)]);
+        let sky = f32::INFINITY;
+        assert_eq!(
+            found,
+            vec![(0, 0.0, 3.0), (0, 3.3, sky), (1, 3.3, sky), (3, 4.0, sky), (5, 0.0, sky), (6, -2.0, 2.5), (6, 4.0, 8.0)]
+        );
     }
 }

@@ -232,6 +232,8 @@ fn measure(
         let naive = db.query(*eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() });
         let (Ok(answer), Ok(naive)) = (answer, naive) else {
             row.refused += 1;
+            let why = db.query(*eye, &QueryParams::default()).err().map_or_else(String::new, |e| e.to_string());
+            println!("  refused {class}: {why}");
             if let Some(f) = csv {
                 writeln!(f, "{name},{parts},{k},{class},{},{},{},1,,,{pvs},,", eye.x, eye.y, eye.z)?;
             }
