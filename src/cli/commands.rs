@@ -161,9 +161,7 @@ impl VisibilityArgs {
             _ => "box,neighbours",
         };
         let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();
-        let floor = if given.is_empty() { default_floor.split(',').collect() } else { given }
-            .into_iter()
-            .filter(|t| *t != "none");
+        let floor = if given.is_empty() { default_floor.split(',').collect() } else { given };
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
@@ -172,9 +170,7 @@ impl VisibilityArgs {
             dov_codec: self.dov_codec,
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
-            zero_dov_floor: floor
-                .map(|t| t.parse::<FloorTest>().map_err(|r| Error::bad_param(Param::ZeroDovFloor, r)))
-                .collect::<Result<_>>()?,
+            zero_dov_floor: FloorTest::parse_list(floor).map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?,
         }))
     }
 }

@@ -159,6 +159,11 @@ pub enum FloorTest {
 impl FloorTest {
     /// The names a build takes: `box` (the object's box meets the cell's) and `neighbours`.
     pub const NAMES: &'static str = "box, box:MARGIN, neighbours";
+
+    /// The tests `names` name, as `--zero-dov-floor` lists them; `none` names no test.
+    pub fn parse_list<'a>(names: impl IntoIterator<Item = &'a str>) -> std::result::Result<Vec<FloorTest>, String> {
+        names.into_iter().filter(|n| *n != "none").map(str::parse).collect()
+    }
 }
 
 impl std::fmt::Display for FloorTest {

@@ -81,11 +81,7 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
         }
     }
     let buffers = load_buffers(doc, gltf.blob.as_deref(), path)?;
-    // Accessors may be shared by primitives, each of which is copied into its mesh: the copies
-    // may come to a few times the buffers, not a file's worth per line of JSON.
-    let buffer_bytes: u64 = buffers.iter().map(|b| b.len() as u64).sum();
-    let budget = READ_OVER.saturating_mul(buffer_bytes).saturating_add(1 << 20);
-    let mut copied = 0u64;
+    let mut copies = CopyBudget::of(&buffers);
     let mut warnings = Vec::new();
     // Base meshes by glTF mesh index (`None`: no triangles).
     let mut meshes: Vec<Option<u32>> = Vec::new();
@@ -112,12 +108,9 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
                 return Err(bad(format!("mesh '{name}': index {i} past its {} vertices", positions.len())));
             }
             let triangles = triangles(mode, &indices);
-            copied = copied.saturating_add(12 * positions.len() as u64 + 4 * triangles.len() as u64);
-            if copied > budget {
-                return Err(bad(format!(
-                    "its primitives read {copied} bytes of vertices and indices from {buffer_bytes} bytes of buffers; at most {READ_OVER} times over are read"
-                )));
-            }
+            copies
+                .charge(12 * positions.len() as u64 + 4 * triangles.len() as u64)
+                .map_err(|r| bad(format!("mesh '{name}': {r}")))?;
             // Indices are u32: the mesh's vertices must stay within them.
             let base = out.positions.len() as u32;
             if u32::try_from(out.positions.len() + positions.len()).is_err() {
@@ -169,13 +162,9 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
                         instances(doc, &node, &buffers).map_err(|r| bad(format!("node {}: {r}", node.index())))?;
                     // GPU instances come from buffer data that many nodes may share.
                     if transforms.len() > 1 {
-                        copied = copied.saturating_add(64 * transforms.len() as u64);
-                        if copied > budget {
-                            return Err(bad(format!(
-                                "node {}: its instances and meshes copy {copied} bytes from {buffer_bytes} bytes of buffers; at most {READ_OVER} times over are read",
-                                node.index()
-                            )));
-                        }
+                        copies
+                            .charge(64 * transforms.len() as u64)
+                            .map_err(|r| bad(format!("node {}: {r}", node.index())))?;
                     }
                     for transform in transforms {
                         let name = names.give(&base);
@@ -211,6 +200,33 @@ pub fn read(path: &Path) -> Result<(Scene, Vec<String>)> {
 
 /// How many times over the buffers' bytes the meshes may copy (primitives sharing accessors).
 const READ_OVER: u64 = 16;
+
+/// What a file's meshes and instances copy out of its buffers: accessors may be shared by
+/// primitives and instance transforms by nodes, each copied again, so the copies may come to
+/// [`READ_OVER`] times the buffers (and 1 MiB), not a file's worth per line of JSON.
+struct CopyBudget {
+    copied: u64,
+    buffers: u64,
+}
+
+impl CopyBudget {
+    fn of(buffers: &[Vec<u8>]) -> CopyBudget {
+        CopyBudget { copied: 0, buffers: buffers.iter().map(|b| b.len() as u64).sum() }
+    }
+
+    /// Counts `bytes` more; the reason when the copies pass the budget.
+    fn charge(&mut self, bytes: u64) -> std::result::Result<(), String> {
+        self.copied = self.copied.saturating_add(bytes);
+        let limit = READ_OVER.saturating_mul(self.buffers).saturating_add(1 << 20);
+        if self.copied > limit {
+            return Err(format!(
+                "its meshes and instances copy {} bytes from {} bytes of buffers; at most {READ_OVER} times over are read",
+                self.copied, self.buffers
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// Every buffer's bytes: the `.glb`'s binary chunk (buffer 0 only, as the GLB format has it), a
 /// `data:` URI, or a file beside `path`. The declared lengths are summed and bounded before any

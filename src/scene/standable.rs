@@ -118,14 +118,15 @@ impl Scene {
         cell_size: Option<f32>,
         eyes: EyeHeights,
     ) -> Result<ViewGrid> {
+        let bounds = self.bounds();
         if region.is_some() || dims.is_some() || self.grid.is_some() {
-            return ViewGrid::resolve(self.bounds(), self.grid.clone(), region, dims, cell_size);
+            return ViewGrid::resolve(bounds, self.grid.clone(), region, dims, cell_size);
         }
-        let e = self.bounds().extent();
+        let e = bounds.extent();
         let size = cell_size.unwrap_or(e.x.max(e.z) / 16.0);
         match self.standable_grid(size, eyes) {
-            Err(Error::BadParam { param: Param::Region, .. }) if !self.bounds().is_empty() => {
-                ViewGrid::resolve(self.bounds(), None, None, None, cell_size)
+            Err(Error::BadParam { param: Param::Region, .. }) if !bounds.is_empty() => {
+                ViewGrid::resolve(bounds, None, None, None, cell_size)
             }
             other => other,
         }
@@ -172,15 +173,14 @@ impl Scene {
                 // The neighbouring lines with nothing from this floor up to the highest eye:
                 // open air (the edge of a hole, a drop) that a viewer at the edge leans over.
                 // A wall standing on the floor has its underside there and is not reached.
+                let (bottom, top) = (y - hair(y, eyes), y + eyes.high.min(ceiling - y));
                 let mut reach = 0u8;
                 for (bit, [di, dk]) in NEIGHBOURS.iter().enumerate() {
                     let (ni, nk) = (i as i64 + di, k as i64 + dk);
                     if ni < 0 || nk < 0 || ni >= i64::from(lines_x) || nk >= i64::from(lines_z) {
                         continue;
                     }
-                    let hair = 1e-4 * eyes.low.max(y.abs() * 1e-3);
-                    let top = y + eyes.high.min(ceiling - y);
-                    if !of_line(nk as u32 * lines_x + ni as u32).iter().any(|c| c.1 > y - hair && c.1 < top) {
+                    if !of_line(nk as u32 * lines_x + ni as u32).iter().any(|c| c.1 > bottom && c.1 < top) {
                         reach |= 1 << bit;
                     }
                 }
@@ -300,10 +300,9 @@ impl Layers {
 }
 
 /// The cells of `grid` (a standable grid with `layers`) in `column` that the eye band of floor
-/// `f` meets:
-/// eyes from `low` up to, not including, `high`, so that a band ending on a layer's bottom does
-/// not reach into it (the layers' own numbers, not the grid's box divided again, which would
-/// reach into it by a rounding).
+/// `f` meets: eyes from `low` up to, not including, `high`, so that a band ending on a layer's
+/// bottom does not reach into it (the layers' own numbers, not the grid's box divided again,
+/// which would reach into it by a rounding).
 fn eye_cells<'g>(
     grid: &'g ViewGrid,
     layers: Layers,
@@ -360,6 +359,12 @@ pub fn height_at(t: [Vec3; 3], x: f32, z: f32) -> Option<f32> {
 /// How far outside a triangle, in barycentric units, a line still meets it.
 const EDGE: f32 = 1e-5;
 
+/// Crossings of a line closer than this to height `y` are one surface: 1e-4 of the lowest eye
+/// height, or 1e-7 of `y` where that is larger (far from the origin, where f32 steps grow).
+fn hair(y: f32, eyes: EyeHeights) -> f32 {
+    1e-4 * eyes.low.max(y.abs() * 1e-3)
+}
+
 /// The floors along the lines: `(line, floor height, height of the next surface above or +∞)`.
 /// Crossings within a hair of each other are one surface (a line through the edge two
 /// triangles share meets both). A floor is a surface that faces up within 45°, that
@@ -376,21 +381,19 @@ const EDGE: f32 = 1e-5;
 fn floors(crossings: &[(u32, f32, f32)], eyes: EyeHeights) -> Vec<(u32, f32, f32)> {
     let mut out = Vec::new();
     for line in crossings.chunk_by(|a, b| a.0 == b.0) {
-        // The surfaces along the line, bottom up: (height, faces up, faces down, a floor).
-        let mut surfaces: Vec<(f32, bool, bool, bool)> = Vec::new();
+        // The surfaces along the line, bottom up: (height, some of it faces down, a floor).
+        let mut surfaces: Vec<(f32, bool, bool)> = Vec::new();
         let mut k = 0;
         while k < line.len() {
             let y = line[k].1;
-            let hair = 1e-4 * eyes.low.max(y.abs() * 1e-3);
-            let group = &line[k..k + line[k..].iter().take_while(|c| c.1 <= y + hair).count()];
-            let up = group.iter().any(|c| c.2 > 0.0);
+            let group = &line[k..k + line[k..].iter().take_while(|c| c.1 <= y + hair(y, eyes)).count()];
             let down = group.iter().any(|c| c.2 < 0.0);
-            surfaces.push((y, up, down, group.iter().any(|c| c.2 >= FLOOR_COS)));
+            surfaces.push((y, down, group.iter().any(|c| c.2 >= FLOOR_COS)));
             k += group.len();
         }
-        for (n, &(y, _, down, floor)) in surfaces.iter().enumerate() {
+        for (n, &(y, down, floor)) in surfaces.iter().enumerate() {
             let above = surfaces.get(n + 1);
-            let open = above.is_none_or(|a| a.2);
+            let open = above.is_none_or(|a| a.1);
             let ceiling = above.map_or(f32::INFINITY, |a| a.0);
             if floor && !down && open && ceiling - y >= eyes.low {
                 out.push((line[0].0, y, ceiling));

@@ -228,16 +228,19 @@ fn measure(
     };
     for (k, (class, eye)) in views.iter().enumerate() {
         let pvs = level.and_then(|l| l.cluster_at(*eye).map(|c| l.pvs_triangles(c) as f64)).unwrap_or(f64::NAN);
-        let answer = db.query(*eye, &QueryParams::default());
-        let naive = db.query(*eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() });
-        let (Ok(answer), Ok(naive)) = (answer, naive) else {
-            row.refused += 1;
-            let why = db.query(*eye, &QueryParams::default()).err().map_or_else(String::new, |e| e.to_string());
-            println!("  refused {class}: {why}");
-            if let Some(f) = csv {
-                writeln!(f, "{name},{parts},{k},{class},{},{},{},1,,,{pvs},,", eye.x, eye.y, eye.z)?;
+        let answers = db.query(*eye, &QueryParams::default()).and_then(|answer| {
+            Ok((answer, db.query(*eye, &QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() })?))
+        });
+        let (answer, naive) = match answers {
+            Ok(both) => both,
+            Err(why) => {
+                row.refused += 1;
+                println!("  refused {class}: {why}");
+                if let Some(f) = csv {
+                    writeln!(f, "{name},{parts},{k},{class},{},{},{},1,,,{pvs},,", eye.x, eye.y, eye.z)?;
+                }
+                continue;
             }
-            continue;
         };
         truth.render_ids(*eye, &mut ids)?;
         let seen: HashSet<u32> = (0..ids.ids.len()).filter_map(|t| ids.object_at(t)).collect();
@@ -302,7 +305,7 @@ fn floors(names: &[String]) -> Result<Vec<FloorTest>, Box<dyn std::error::Error>
     if names.is_empty() {
         return Ok(VisibilityParams::default().zero_dov_floor);
     }
-    Ok(names.iter().filter(|n| *n != "none").map(|n| n.parse::<FloorTest>()).collect::<Result<_, _>>()?)
+    Ok(FloorTest::parse_list(names.iter().map(String::as_str))?)
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
