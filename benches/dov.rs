@@ -85,7 +85,7 @@ fn dov_benches(c: &mut Criterion) {
     group.bench_function(format!("region rays {rays}"), |b| {
         b.iter(|| {
             k = (k + 1) % cells.len();
-            pool.install(|| hdov::dov::sampler::region_finds(&cpu, &cells[k], &sequence))
+            pool.install(|| hdov::dov::sampler::region_finds(&cpu, &hdov::grid::ViewCell::whole(cells[k]), &sequence))
         })
     });
     group.finish();

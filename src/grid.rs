@@ -1,6 +1,8 @@
 //! The viewing-cell grid: a box region cut into nx × ny × nz cells (y is height), every one of
 //! them a view cell, or only those of a [`CellSet`] (the places a viewer can stand, found from
-//! the geometry by `scene::standable`): the lattice then only numbers the cells.
+//! the geometry by `scene::standable`): the lattice then only numbers the cells. A lattice cell
+//! that a wall cuts is several view cells, one per side ([`ViewGrid::parts`]): the first keeps
+//! the lattice id, the others are numbered after the lattice.
 //!
 //! Sample points are the cell corners, shared between neighbouring cells: a grid of nx × ny × nz
 //! cells has (nx+1)(ny+1)(nz+1) corners, each measured once.
@@ -25,6 +27,70 @@ pub struct ViewGrid {
     /// is set where a floor's eyes reach the cell there. `None`: anywhere in the cell.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub places: Option<Vec<u64>>,
+    /// The further view cells of lattice cells that walls cut, by lattice cell ascending: entry
+    /// `k` is view cell `lattice_count() + k`, the squares of its lattice cell's footprint on one
+    /// side (the lattice cell's own id keeps the squares of [`ViewGrid::places`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<CellPart>,
+}
+
+/// A further view cell of a lattice cell that a wall cuts ([`ViewGrid::parts`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CellPart {
+    /// The lattice cell's id.
+    pub cell: u32,
+    /// Its squares, as [`ViewGrid::places`].
+    pub places: u64,
+}
+
+/// Every square of a footprint: a view cell where a viewer may be anywhere.
+pub const ALL_PLACES: u64 = u64::MAX;
+
+/// One view cell as its samplers see it: the box of its lattice cell and the squares of the
+/// footprint where viewers stand (bit `z · 8 + x`, [`ALL_PLACES`] for anywhere).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewCell {
+    pub bounds: Aabb,
+    pub places: u64,
+}
+
+impl ViewCell {
+    /// A view cell where a viewer may be anywhere in `bounds`.
+    pub fn whole(bounds: Aabb) -> Self {
+        ViewCell { bounds, places: ALL_PLACES }
+    }
+
+    /// The point of the cell at `u` ∈ [0, 1)³: the box's own point for a whole cell; otherwise
+    /// `u.x` picks a square (the squares in bit order, each an equal share) and places the
+    /// point within it with what is left of `u.x` and with `u.z`, `u.y` the height. Evenly
+    /// spread points of the cube stay evenly spread over the squares.
+    pub fn point(&self, u: Vec3) -> Vec3 {
+        if self.places == ALL_PLACES || self.places == 0 {
+            return self.bounds.min + u * self.bounds.extent();
+        }
+        let n = self.places.count_ones();
+        let t = u.x.clamp(0.0, 1.0) * n as f32;
+        let k = (t.floor() as u32).min(n - 1);
+        let mut left = self.places;
+        for _ in 0..k {
+            left &= left - 1;
+        }
+        let bit = left.trailing_zeros();
+        let edge = PLACES_PER_EDGE as f32;
+        let (sx, sz) = ((bit % PLACES_PER_EDGE) as f32, (bit / PLACES_PER_EDGE) as f32);
+        let rel = Vec3::new((sx + (t - k as f32).clamp(0.0, 1.0)) / edge, u.y, (sz + u.z) / edge);
+        self.bounds.min + rel * self.bounds.extent()
+    }
+
+    /// The square of the footprint holding `p` (clamped to the footprint): its bit.
+    pub fn square_of(&self, p: Vec3) -> u32 {
+        let b = self.bounds;
+        let square = |a: usize| {
+            let f = ((p[a] - b.min[a]) / b.extent()[a] * PLACES_PER_EDGE as f32).floor();
+            if f.is_finite() { (f.max(0.0) as u32).min(PLACES_PER_EDGE - 1) } else { 0 }
+        };
+        square(2) * PLACES_PER_EDGE + square(0)
+    }
 }
 
 /// Squares per cell edge of [`ViewGrid::places`].
@@ -94,6 +160,31 @@ impl CellSet {
     }
 }
 
+/// The parts of a mask of places ([`ViewGrid::places`]) that 4-neighbouring squares join, by
+/// their lowest square: the sides of a wall through a cell.
+pub fn place_parts(mask: u64) -> Vec<u64> {
+    let (mut left, mut parts) = (mask, Vec::new());
+    while left != 0 {
+        let mut part = left & left.wrapping_neg();
+        loop {
+            // Grow by one step along x (not across a row's end) and z.
+            let grown = part
+                | ((part << 1) & !0x0101_0101_0101_0101)
+                | ((part >> 1) & !0x8080_8080_8080_8080)
+                | (part << 8)
+                | (part >> 8);
+            let grown = grown & mask;
+            if grown == part {
+                break;
+            }
+            part = grown;
+        }
+        left &= !part;
+        parts.push(part);
+    }
+    parts
+}
+
 /// The ids `id` gives the lattice points of the box whose range along each axis is
 /// `range(axis)`, x fastest, then z, then y.
 fn lattice_block(range: impl Fn(usize) -> std::ops::RangeInclusive<u32>, id: impl Fn([u32; 3]) -> usize) -> Vec<usize> {
@@ -115,7 +206,7 @@ impl ViewGrid {
 
     /// A grid of `dims` cells (x, y, z) over `region`, every cell a view cell.
     pub fn new(region: Aabb, dims: [u32; 3]) -> Self {
-        Self { region, dims, present: None, places: None }
+        Self { region, dims, present: None, places: None, parts: Vec::new() }
     }
 
     /// The grid a build uses. Region: `region`, else the scene's own grid's, else the footprint
@@ -175,7 +266,7 @@ impl ViewGrid {
             return Err(format!("grid dims {:?} make more than {} cells", self.dims, Self::MAX_CELLS));
         }
         if let Some(set) = &self.present {
-            set.check(self.cell_count())?;
+            set.check(self.lattice_count())?;
             if set.is_empty() {
                 return Err("the grid has no view cell".into());
             }
@@ -185,45 +276,109 @@ impl ViewGrid {
                 Err(format!("{} places for {} view cells", p.len(), set.len()))
             }
             (Some(_), None) => Err("places to stand without view cells".into()),
-            _ => Ok(()),
+            _ => self.check_parts(),
         }
     }
 
-    /// Whether a viewer can stand at `p`'s square of view cell `id` (`c` its coordinates):
-    /// always in a grid without [`ViewGrid::places`].
-    pub fn can_stand(&self, id: usize, c: [u32; 3], p: Vec3) -> bool {
-        let (Some(places), Some(set)) = (&self.places, &self.present) else { return true };
-        let Some(&mask) = places.get(set.rank(id)) else { return false };
-        let b = self.cell_box(c);
-        let square = |a: usize| {
-            let f = ((p[a] - b.min[a]) / b.extent()[a] * PLACES_PER_EDGE as f32).floor();
-            if f.is_finite() { (f.max(0.0) as u32).min(PLACES_PER_EDGE - 1) } else { 0 }
-        };
-        mask >> (square(2) * PLACES_PER_EDGE + square(0)) & 1 == 1
+    /// Checks that each part is of a view cell with places, in ascending order, and shares no
+    /// square with its cell or another part of it.
+    fn check_parts(&self) -> Result<(), String> {
+        let mut last: Option<(u32, u64)> = None;
+        for p in &self.parts {
+            let id = p.cell as usize;
+            let Some(own) = self.places.as_ref().filter(|_| self.is_present(id) && id < self.lattice_count()).map(|places| {
+                let set = self.present.as_ref().expect("places come with view cells");
+                places[set.rank(id)]
+            }) else {
+                return Err(format!("a part of cell {id}, which is no view cell with places"));
+            };
+            let taken = own | last.filter(|l| l.0 == p.cell).map_or(0, |l| l.1);
+            if p.places == 0 || p.places & taken != 0 || last.is_some_and(|l| l.0 > p.cell) {
+                return Err(format!("a part of cell {id} is empty, overlaps its cell's squares or is out of order"));
+            }
+            last = Some((p.cell, taken | p.places));
+        }
+        Ok(())
+    }
+
+    /// The view cell of lattice cell `id` (a view cell, `c` its coordinates) where a viewer at
+    /// `p` stands: `id` itself or a further part of it ([`ViewGrid::parts`]); `None` where in
+    /// the cell no viewer stands. Always `id` in a grid without [`ViewGrid::places`].
+    pub fn standing_cell(&self, id: usize, c: [u32; 3], p: Vec3) -> Option<usize> {
+        let (Some(places), Some(set)) = (&self.places, &self.present) else { return Some(id) };
+        let bit = 1u64 << ViewCell::whole(self.cell_box(c)).square_of(p);
+        if places.get(set.rank(id))? & bit != 0 {
+            return Some(id);
+        }
+        let first = self.parts.partition_point(|q| (q.cell as usize) < id);
+        let k = self.parts[first..].iter().take_while(|q| q.cell as usize == id).position(|q| q.places & bit != 0)?;
+        Some(self.lattice_count() + first + k)
+    }
+
+    /// View cell `id` as samplers see it.
+    pub fn view_cell(&self, id: usize) -> ViewCell {
+        ViewCell { bounds: self.cell_box(self.cell_coords(id)), places: self.places_of(id) }
+    }
+
+    /// The squares of view cell `id` where viewers stand ([`ALL_PLACES`] without places).
+    pub fn places_of(&self, id: usize) -> u64 {
+        if let Some(part) = id.checked_sub(self.lattice_count()).and_then(|k| self.parts.get(k)) {
+            return part.places;
+        }
+        match (&self.places, &self.present) {
+            (Some(places), Some(set)) if set.contains(id) => places[set.rank(id)],
+            _ => ALL_PLACES,
+        }
+    }
+
+    /// The corners of view cell `id` next to a square where viewers stand (a lattice corner is
+    /// the outer corner of one square of each cell it bounds): those of its 8 that lie on its
+    /// side of a wall. All 8 where none does (a part in the middle of its cell), so that every
+    /// view cell has measured points.
+    pub fn view_corners(&self, id: usize) -> Vec<usize> {
+        let c = self.cell_coords(id);
+        let all = self.cell_corners(c);
+        let places = self.places_of(id);
+        let last = PLACES_PER_EDGE - 1;
+        let kept: Vec<usize> = (0..8)
+            .filter(|&i| places >> ((i >> 2 & 1) * last * PLACES_PER_EDGE + (i & 1) * last) & 1 == 1)
+            .map(|i| all[i as usize])
+            .collect();
+        if kept.is_empty() { all.to_vec() } else { kept }
     }
 
     /// Whether cell `id` is a view cell.
     pub fn is_present(&self, id: usize) -> bool {
-        id < self.cell_count() && self.present.as_ref().is_none_or(|s| s.contains(id))
+        match id.checked_sub(self.lattice_count()) {
+            Some(k) => k < self.parts.len(),
+            None => self.present.as_ref().is_none_or(|s| s.contains(id)),
+        }
     }
 
-    /// The ids of the view cells, ascending.
+    /// The ids of the view cells, ascending (a wall's further parts last).
     pub fn present_ids(&self) -> Box<dyn Iterator<Item = usize> + '_> {
+        let parts = self.lattice_count()..self.cell_count();
         match &self.present {
-            Some(set) => Box::new(set.ids()),
+            Some(set) => Box::new(set.ids().chain(parts)),
             None => Box::new(0..self.cell_count()),
         }
     }
 
     /// How many view cells.
     pub fn present_count(&self) -> usize {
-        self.present.as_ref().map_or(self.cell_count(), CellSet::len)
+        self.present.as_ref().map_or(self.lattice_count(), CellSet::len) + self.parts.len()
     }
 
-    /// Cells in the lattice: the ids run below it (view cells or not).
-    pub fn cell_count(&self) -> usize {
+    /// Cells in the lattice.
+    pub fn lattice_count(&self) -> usize {
         // Saturating: an unchecked grid's count must not wrap into a small one ([`ViewGrid::check`]).
         self.dims.iter().fold(1usize, |n, &d| n.saturating_mul(d as usize))
+    }
+
+    /// The ids of cells: the lattice's, then the further parts of cells that walls cut; the
+    /// ids run below it (view cells or not).
+    pub fn cell_count(&self) -> usize {
+        self.lattice_count().saturating_add(self.parts.len())
     }
 
     /// The side lengths of one cell.
@@ -237,8 +392,9 @@ impl ViewGrid {
         (c[1] as usize * nz + c[2] as usize) * nx + c[0] as usize
     }
 
-    /// The `[i, j, k]` of cell `id`.
+    /// The `[i, j, k]` of cell `id` (of its lattice cell, for a further part).
     pub fn cell_coords(&self, id: usize) -> [u32; 3] {
+        let id = id.checked_sub(self.lattice_count()).and_then(|k| self.parts.get(k)).map_or(id, |p| p.cell as usize);
         let [nx, _, nz] = self.dims.map(|d| d as usize);
         [(id % nx) as u32, (id / (nx * nz)) as u32, ((id / nx) % nz) as u32]
     }
@@ -308,19 +464,33 @@ impl ViewGrid {
 
     /// The corner ids of the view cells within `ring` cells of cell `c`, ascending: in a grid
     /// of view cells only, the corners where a viewer nearly is (not those of cells inside a
-    /// solid or across a floor); [`ViewGrid::neighbourhood_corners`] otherwise.
+    /// solid or across a floor, nor those behind a wall, [`ViewGrid::view_corners`]);
+    /// [`ViewGrid::neighbourhood_corners`] otherwise.
     pub fn neighbourhood_view_corners(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
         if self.present.is_none() {
             return self.neighbourhood_corners(c, ring);
         }
-        let mut out: Vec<usize> = self
-            .neighbourhood_cells(c, ring)
-            .into_iter()
-            .filter(|&id| self.is_present(id))
-            .flat_map(|id| self.cell_corners(self.cell_coords(id)))
-            .collect();
+        let mut out: Vec<usize> =
+            self.neighbourhood_view_cells(c, ring).into_iter().flat_map(|id| self.view_corners(id)).collect();
         out.sort_unstable();
         out.dedup();
+        out
+    }
+
+    /// The view cells within `ring` cells of cell `c` (its own included): the lattice's view
+    /// cells, then the further parts of those that walls cut.
+    pub fn neighbourhood_view_cells(&self, c: [u32; 3], ring: u32) -> Vec<usize> {
+        let mut out: Vec<usize> = self.neighbourhood_cells(c, ring).into_iter().filter(|&id| self.is_present(id)).collect();
+        if !self.parts.is_empty() {
+            let lattice = self.lattice_count();
+            let parts = out.iter().flat_map(|&id| {
+                let first = self.parts.partition_point(|q| (q.cell as usize) < id);
+                let n = self.parts[first..].iter().take_while(|q| q.cell as usize == id).count();
+                (first..first + n).map(move |k| lattice + k)
+            });
+            let parts: Vec<usize> = parts.collect();
+            out.extend(parts);
+        }
         out
     }
 
@@ -371,7 +541,8 @@ mod tests {
         g.places = Some(vec![half, !0, !0, !0, !0]);
         assert!(g.check().is_ok());
         let c = g.cell_coords(3);
-        assert!(g.can_stand(3, c, Vec3::new(3.2, 1.0, 0.5)) && !g.can_stand(3, c, Vec3::new(3.7, 1.0, 0.5)));
+        assert_eq!(g.standing_cell(3, c, Vec3::new(3.2, 1.0, 0.5)), Some(3));
+        assert_eq!(g.standing_cell(3, c, Vec3::new(3.7, 1.0, 0.5)), None);
         g.places = Some(vec![!0; 4]);
         assert!(g.check().is_err());
         g.places = None;
@@ -381,6 +552,79 @@ mod tests {
         let bad: CellSet = serde_json::from_str("[[3,6],[5,8]]").unwrap();
         assert!(bad.check(16).is_err());
         g.present = Some(CellSet::default());
+        assert!(g.check().is_err());
+    }
+
+    #[test]
+    fn a_mask_of_places_falls_in_parts() {
+        assert_eq!(place_parts(0).len(), 0);
+        assert_eq!(place_parts(u64::MAX).len(), 1);
+        // Columns 0–2 and 4–7 of every row: a wall at column 3.
+        let row = 0b1111_0111u64;
+        assert_eq!(place_parts((0..8).fold(0, |m, z| m | row << (8 * z))).len(), 2);
+        // The same with a door in row 5.
+        assert_eq!(place_parts((0..8).fold(0, |m, z| m | row << (8 * z)) | 1 << (5 * 8 + 3)).len(), 1);
+        // Bit 7 of a row and bit 0 of the next are not neighbours.
+        assert_eq!(place_parts(1 << 7 | 1 << 8).len(), 2);
+        assert_eq!(place_parts(1 << 7 | 1 << 15).len(), 1);
+    }
+
+    /// A wall along x = ½ through cell 5 of a 4 × 1 × 4 grid: its west squares keep id 5, its
+    /// east squares are view cell 16, the first after the lattice.
+    fn cut_grid() -> ViewGrid {
+        let west = (0..8).fold(0u64, |m, z| m | 0x07 << (8 * z));
+        let mut g = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::new(4.0, 1.0, 4.0)), [4, 1, 4]);
+        g.present = Some(CellSet::from_ids(vec![4, 5, 6]));
+        g.places = Some(vec![ALL_PLACES, west, ALL_PLACES]);
+        g.parts = vec![CellPart { cell: 5, places: west << 4 | west << 5 }];
+        g
+    }
+
+    #[test]
+    fn a_cell_cut_by_a_wall_is_a_view_cell_per_side() {
+        let g = cut_grid();
+        assert!(g.check().is_ok());
+        assert_eq!((g.lattice_count(), g.cell_count(), g.present_count()), (16, 17, 4));
+        assert_eq!(g.present_ids().collect::<Vec<_>>(), vec![4, 5, 6, 16]);
+        assert!(g.is_present(16) && !g.is_present(17) && !g.is_present(7));
+        assert_eq!(g.cell_coords(16), g.cell_coords(5));
+        let c = g.cell_coords(5);
+        assert_eq!(g.standing_cell(5, c, Vec3::new(1.2, 0.5, 0.5)), Some(5));
+        assert_eq!(g.standing_cell(5, c, Vec3::new(1.8, 0.5, 0.5)), Some(16));
+        // The wall's own squares (x in [3/8, 4/8)) are nobody's.
+        assert_eq!(g.standing_cell(5, c, Vec3::new(1.4, 0.5, 0.5)), None);
+        // Each side keeps the corners next to its squares; a whole cell all 8.
+        let x_of = |ids: Vec<usize>| ids.iter().map(|&k| g.corner_coords(k)[0]).collect::<Vec<_>>();
+        assert_eq!(x_of(g.view_corners(5)), vec![1; 4]);
+        assert_eq!(x_of(g.view_corners(16)), vec![2; 4]);
+        assert_eq!(g.view_corners(4).len(), 8);
+        // Points of a side lie in its squares, spread over all of them.
+        for (id, x) in [(5, 1.0..1.375), (16, 1.5..2.0)] {
+            let cell = g.view_cell(id);
+            let u = |k: u32| Vec3::new((k as f32 + 0.5) / 64.0, 0.3, ((k * 37 % 64) as f32 + 0.5) / 64.0);
+            let points: Vec<Vec3> = (0..64).map(|k| cell.point(u(k))).collect();
+            assert!(points.iter().all(|p| x.contains(&p.x) && g.standing_cell(5, c, *p) == Some(id)), "{id}");
+            let squares: std::collections::HashSet<u32> = points.iter().map(|&p| cell.square_of(p)).collect();
+            assert_eq!(squares.len() as u32, cell.places.count_ones(), "{id}");
+        }
+        assert_eq!(g.neighbourhood_view_cells(g.cell_coords(4), 1), vec![4, 5, 16]);
+        let json = serde_json::to_string(&g).unwrap();
+        assert_eq!(serde_json::from_str::<ViewGrid>(&json).unwrap(), g);
+    }
+
+    #[test]
+    fn parts_that_overlap_or_lack_a_view_cell_are_refused() {
+        let mut g = cut_grid();
+        g.parts[0].places |= 1;
+        assert!(g.check().is_err());
+        let mut g = cut_grid();
+        g.parts[0].cell = 7;
+        assert!(g.check().is_err());
+        let mut g = cut_grid();
+        g.parts.push(g.parts[0]);
+        assert!(g.check().is_err());
+        let mut g = cut_grid();
+        g.parts[0].places = 0;
         assert!(g.check().is_err());
     }
 

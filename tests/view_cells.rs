@@ -49,7 +49,7 @@ fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
     }
     let stands = |p: [f32; 3]| {
         let c = g.cell_of(Vec3::from(p)).unwrap();
-        g.can_stand(g.cell_id(c), c, Vec3::from(p))
+        g.standing_cell(g.cell_id(c), c, Vec3::from(p)).is_some()
     };
     for p in STANDING {
         assert!(stands(p), "{p:?} is where a person stands, but refused within its cell");
@@ -61,11 +61,21 @@ fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
     // layer) the core and the walls around it fill 4 of the 25 columns; upstairs (eyes at
     // 4.3–5.3) and on the roof (7.6–8.6) two layers of all 25.
     assert_eq!(g.cell_size(), Vec3::new(2.0, 1.0, 2.0));
-    let layer = |y: u32| g.present_ids().filter(|&id| g.cell_coords(id)[1] == y).count();
+    let layer = |y: u32| g.present_ids().filter(|&id| id < g.lattice_count() && g.cell_coords(id)[1] == y).count();
     assert_eq!((0..g.dims[1]).map(layer).collect::<Vec<_>>(), vec![21, 0, 0, 25, 25, 0, 25, 25]);
-    // Cells are not yet cut at walls: the four ground-floor cells the partition runs through
-    // hold both rooms (the fifth has the door, which joins them).
-    assert_eq!(scene.cells_across_walls(2.0, EyeHeights::default()).unwrap(), (4, 121));
+    // The four ground-floor cells the partition runs through are cut into one view cell per
+    // room (the fifth has the door, which joins them), and no view cell spans a wall.
+    assert_eq!(scene.cells_across_walls(2.0, EyeHeights::default()).unwrap(), (4, 125));
+    for id in g.present_ids() {
+        assert_eq!(hdov::grid::place_parts(g.places_of(id)).len(), 1, "view cell {id} spans a wall");
+    }
+    for z in [1.0, 3.0, 7.0, 9.0] {
+        let (west, east) = (Vec3::new(4.6, 1.5, z), Vec3::new(5.4, 1.5, z));
+        let c = g.cell_of(west).unwrap();
+        assert_eq!(g.cell_of(east), Some(c));
+        let side = |p| g.standing_cell(g.cell_id(c), c, p);
+        assert!(side(west).is_some() && side(east).is_some() && side(west) != side(east), "z = {z}");
+    }
     // A cell marked from a floor never reaches below it: every cell's bottom is at or above
     // the ground floor, and none spans the upper floor's slab (3.0–3.3).
     for id in g.present_ids() {
@@ -138,4 +148,45 @@ fn both_storeys_answer_and_a_solid_is_refused() {
         let e = db.query(Vec3::from(p), &naive).unwrap_err().to_string();
         assert!(e.contains("inside a wall") && !e.contains('\n'), "{p:?}: {e}");
     }
+}
+
+/// Two rooms, a box in each, and a 0.3 m wall between them through the middle of a column of
+/// 2 m cells: each side of the wall is a view cell of its own, sampled where its viewers
+/// stand, and sees its own room's box only (no floors, so that nothing but the samples counts).
+#[test]
+fn a_wall_through_a_cell_parts_its_answers() {
+    let mut b = hdov_testkit::scenes::SceneBuilder::default();
+    let v = Vec3::new;
+    b.aabox(v(0.0, -0.3, 0.0), v(10.0, 0.0, 4.0));
+    b.aabox(v(4.9, 0.0, -1.0), v(5.2, 3.0, 5.0));
+    let west = b.aabox(v(1.0, 0.0, 1.0), v(2.0, 1.0, 2.0));
+    let east = b.aabox(v(8.0, 0.0, 1.0), v(8.5, 1.0, 2.0));
+    let mut scene = b.build();
+    let g = grid(&scene);
+    let (w, e) = (v(4.6, 1.5, 2.0), v(5.5, 1.5, 2.0));
+    let c = g.cell_of(w).unwrap();
+    assert_eq!(g.cell_of(e), Some(c), "both sides in one lattice cell");
+    scene.grid = Some(g);
+    let tmp = tempfile::tempdir().unwrap();
+    let params = BuildParams {
+        objects: hdov::ObjectParts::File,
+        visibility: Some(VisibilityParams {
+            resolution: 32,
+            backend: BackendKind::Cpu,
+            zero_dov_floor: vec![],
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let dir = tmp.path().join("db");
+    hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+    let db = Database::open(&dir).unwrap();
+    let (wc, ec) = (db.locate(w).unwrap(), db.locate(e).unwrap());
+    assert!(wc.0 == ec.0 && wc.1 != ec.1, "{wc:?} {ec:?}");
+    let naive = QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() };
+    let sees = |p: Vec3, object: u32| {
+        db.query(p, &naive).unwrap().items.iter().any(|i| i.kind == ItemKind::Object && i.id == object)
+    };
+    assert!(sees(w, west) && !sees(w, east), "the west side sees the east room");
+    assert!(sees(e, east) && !sees(e, west), "the east side sees the west room");
 }

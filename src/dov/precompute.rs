@@ -224,13 +224,14 @@ pub fn precompute_shard(
                 tally.measured(false);
             }
         }
-        let own = grid.cell_corners(coords);
+        let own = grid.view_corners(id);
         let own_dov: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).collect();
         let nearby: Vec<&PointDov> = needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]).collect();
         let site = CellSite {
             id,
             coords,
             bounds: cell_box,
+            places: grid.places_of(id),
             grid,
             corners: &own_dov,
             nearby: &nearby,
@@ -245,7 +246,7 @@ pub fn precompute_shard(
         // What the samplers found from the neighbouring cells by themselves (region rays) counts
         // as seen nearby, as their corners' views do (the neighbours floor).
         let found_around: Vec<PointDov> = grid
-            .neighbourhood_cells(coords, 1)
+            .neighbourhood_view_cells(coords, 1)
             .into_iter()
             .filter(|&n| n != id)
             .flat_map(|n| samplers.iter().filter_map(move |s| s.found_from(n)))

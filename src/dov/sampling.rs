@@ -8,7 +8,7 @@ use std::collections::HashSet;
 use glam::Vec3;
 
 use super::PointDov;
-use crate::geom::Aabb;
+use crate::grid::ViewCell;
 use crate::rng::Rng;
 
 /// `k` written in `base` and mirrored about the point: the Halton sequence's coordinate in
@@ -35,15 +35,21 @@ pub fn halton3(k: u32) -> Vec3 {
 /// neighbouring cells then cast different rays, not the same pattern moved by a cell, and what
 /// one misses another may meet.
 pub struct RegionRays {
-    cell: Aabb,
+    cell: ViewCell,
     shift: [f32; 5],
 }
 
 impl RegionRays {
-    pub fn new(cell: &Aabb) -> Self {
-        let seed = cell.min.to_array().iter().chain(&cell.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
+    /// The rays of `cell`, their origins where its viewers stand ([`ViewCell::point`]).
+    pub fn new(cell: &ViewCell) -> Self {
+        let b = cell.bounds;
+        let mut seed = b.min.to_array().iter().chain(&b.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
             (h ^ u64::from(c.to_bits())).wrapping_mul(0xbf58_476d_1ce4_e5b9)
         });
+        // The parts of one lattice cell cast different rays.
+        if cell.places != crate::grid::ALL_PLACES {
+            seed = (seed ^ cell.places).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        }
         let mut rng = Rng::new(seed);
         Self { cell: *cell, shift: std::array::from_fn(|_| rng.unit()) }
     }
@@ -51,7 +57,7 @@ impl RegionRays {
     /// The ray of one point of a [`RegionSequence`]: its origin and unit direction.
     pub fn ray(&self, h: &[f32; 5]) -> (Vec3, Vec3) {
         let u = |i: usize| (h[i] + self.shift[i]).fract();
-        let origin = self.cell.min + Vec3::new(u(0), u(1), u(2)) * self.cell.extent();
+        let origin = self.cell.point(Vec3::new(u(0), u(1), u(2)));
         let z = 1.0 - 2.0 * u(3);
         let phi = std::f32::consts::TAU * u(4);
         let r = (1.0 - z * z).max(0.0).sqrt();
@@ -74,14 +80,15 @@ impl RegionSequence {
     }
 }
 
-/// The `k`-th Halton point of `cell` (k ≥ 1): the same relative position in every cell.
-pub fn halton_point(cell: &Aabb, k: u32) -> Vec3 {
-    cell.min + halton3(k) * cell.extent()
+/// The `k`-th Halton point of `cell` (k ≥ 1): the same relative position in every whole cell,
+/// and among the places of one that is not ([`ViewCell::point`]).
+pub fn halton_point(cell: &ViewCell, k: u32) -> Vec3 {
+    cell.point(halton3(k))
 }
 
-/// The `count` interior sample points of a cell box, Halton points 1 to `count`
-/// (the `interior` sampler).
-pub fn interior_points(cell: &Aabb, count: u32) -> Vec<Vec3> {
+/// The `count` interior sample points of a cell, Halton points 1 to `count` (the `interior`
+/// sampler).
+pub fn interior_points(cell: &ViewCell, count: u32) -> Vec<Vec3> {
     (1..=count).map(|k| halton_point(cell, k)).collect()
 }
 

@@ -25,7 +25,9 @@ pub use manifest::{Counts, FileChecksum, FileEntry, LayoutInfo, Manifest, Visibi
 /// error, and the catalog's error ladder and descent faces. 4: objects may be parts of the
 /// file's objects (the catalog's `part`). 5: a grid may hold view cells only where a viewer can
 /// stand (the manifest grid's `present` runs), and shards split the view cells, not the lattice.
-pub const FORMAT_VERSION: u32 = 5;
+/// 6: a lattice cell that a wall cuts is several view cells (the grid's `parts`, numbered after
+/// the lattice), and a cell's sample points lie where its viewers stand.
+pub const FORMAT_VERSION: u32 = 6;
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const TREE_FILE: &str = "tree.pages";
 pub const GEOMETRY_FILE: &str = "geometry.blob";

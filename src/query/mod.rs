@@ -367,7 +367,8 @@ impl Database {
         }
     }
 
-    /// The view cell holding `at` (points on an inner cell border belong to the upper cell);
+    /// The view cell holding `at` (points on an inner cell border belong to the upper cell; in
+    /// a cell that a wall cuts, the part on `at`'s side) and its lattice cell's coordinates;
     /// refused outside the grid, in a cell that is not a view cell, and where in its cell no
     /// viewer stands (an eighth of a cell's footprint at a time: inside a wall).
     pub fn locate(&self, at: Vec3) -> Result<([u32; 3], u32)> {
@@ -387,13 +388,13 @@ impl Database {
             );
             return Err(Error::bad_param(Param::At, reason));
         }
-        if !grid.can_stand(id, cell, at) {
+        let Some(id) = grid.standing_cell(id, cell, at) else {
             let reason = format!(
                 "{:?} is where no viewer stands in cell {cell:?}: inside a wall or a solid, or with no floor an eye height below",
                 at.to_array()
             );
             return Err(Error::bad_param(Param::At, reason));
-        }
+        };
         Ok((cell, id as u32))
     }
 

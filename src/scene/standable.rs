@@ -13,14 +13,16 @@
 //! [`ViewGrid::places`]) around the line, and the places around it that are open air from the
 //! floor up to the highest eye (a viewer at the edge of a hole or a drop leans over it; a wall
 //! standing on the floor is not open). Layers of cells are at most the lowest eye height tall, so
-//! that a cell marked from a floor never reaches below it into the storey underneath.
+//! that a cell marked from a floor never reaches below it into the storey underneath. A cell
+//! whose places fall in parts that no place joins (a wall through it) is one view cell per
+//! part ([`ViewGrid::parts`]): no answer mixes two rooms.
 
 use glam::Vec3;
 
 use super::Scene;
 use crate::error::{Error, Param, Result};
 use crate::geom::Aabb;
-use crate::grid::{CellSet, ViewGrid};
+use crate::grid::{CellPart, CellSet, ViewGrid, place_parts};
 
 /// Vertical lines per cell edge (8 × 8 per cell column): floors narrower than an eighth of a cell
 /// (a ledge, a step's nose) may go unseen.
@@ -227,19 +229,30 @@ impl Scene {
                 }
             }
         }
+        // A cell whose places fall in parts that no line between them joins (a wall, a pillar
+        // or a drop through it) is one view cell per part, so that no answer mixes two rooms.
+        let mut own = Vec::with_capacity(places.len());
+        for (&id, &mask) in &places {
+            let mut parts = place_parts(mask).into_iter();
+            own.push(parts.next().expect("a cell in the map has a place"));
+            grid.parts.extend(parts.map(|places| CellPart { cell: id as u32, places }));
+        }
         grid.present = Some(CellSet::from_ids(places.keys().map(|&id| id as u32).collect()));
-        grid.places = Some(places.into_values().collect());
+        grid.places = Some(own);
+        if grid.cell_count() as u64 > ViewGrid::MAX_CELLS {
+            let reason = format!("{cell_size} makes more than {} view cells; use larger cells", ViewGrid::MAX_CELLS);
+            return Err(Error::bad_param(Param::CellSize, reason));
+        }
         Ok(grid)
     }
 
-    /// Of the view cells [`Scene::standable_grid`] makes, how many hold places to stand in two
-    /// or more parts that no line between them joins (4-neighbours of its 8 × 8 lines): a wall,
-    /// a pillar or a drop through the cell, so that the cell's answer mixes what both parts see.
-    /// Returns (such cells, view cells). A measure of what cutting cells at walls would change.
+    /// Of the lattice cells [`Scene::standable_grid`] finds places in, how many a wall cuts into
+    /// several view cells. Returns (such cells, view cells).
     pub fn cells_across_walls(&self, cell_size: f32, eyes: EyeHeights) -> Result<(usize, usize)> {
         let grid = self.standable_grid(cell_size, eyes)?;
-        let places = grid.places.as_deref().unwrap_or_default();
-        Ok((places.iter().filter(|&&m| parts_of(m) > 1).count(), grid.present_count()))
+        let mut cut: Vec<u32> = grid.parts.iter().map(|p| p.cell).collect();
+        cut.dedup();
+        Ok((cut.len(), grid.present_count()))
     }
 
     /// Where each vertical line of the lattice `origin + (i + ½, ·, k + ½) · spacing`,
@@ -319,29 +332,6 @@ fn eye_cells<'g>(
     (first..end.max(first + 1)).map(move |y| grid.cell_id([x, y, z]))
 }
 
-/// Parts of an 8 × 8 mask of lines (bit `z · 8 + x`) that 4-neighbours join.
-fn parts_of(mask: u64) -> u32 {
-    let (mut left, mut parts) = (mask, 0);
-    while left != 0 {
-        let mut part = left & left.wrapping_neg();
-        loop {
-            // Grow by one step along x (not across a row's end) and z.
-            let grown = part
-                | ((part << 1) & !0x0101_0101_0101_0101)
-                | ((part >> 1) & !0x8080_8080_8080_8080)
-                | (part << 8)
-                | (part >> 8);
-            let grown = grown & mask;
-            if grown == part {
-                break;
-            }
-            part = grown;
-        }
-        left &= !part;
-        parts += 1;
-    }
-    parts
-}
 
 /// The height of triangle `t` over `(x, z)`, if its footprint holds the point, edges included
 /// with a margin of [`EDGE`]: a line through the shared edge of two triangles (the diagonal of a
@@ -406,20 +396,6 @@ fn floors(crossings: &[(u32, f32, f32)], eyes: EyeHeights) -> Vec<(u32, f32, f32
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn parts_of_a_mask_of_lines() {
-        assert_eq!(parts_of(0), 0);
-        assert_eq!(parts_of(u64::MAX), 1);
-        // Columns 0–2 and 4–7 of every row: a wall at column 3.
-        let row = 0b1111_0111u64;
-        assert_eq!(parts_of((0..8).fold(0, |m, z| m | row << (8 * z))), 2);
-        // The same with a door in row 5.
-        assert_eq!(parts_of((0..8).fold(0, |m, z| m | row << (8 * z)) | 1 << (5 * 8 + 3)), 1);
-        // Bit 7 of a row and bit 0 of the next are not neighbours.
-        assert_eq!(parts_of(1 << 7 | 1 << 8), 2);
-        assert_eq!(parts_of(1 << 7 | 1 << 15), 1);
-    }
 
     #[test]
     fn heights_over_a_triangle_and_off_it() {

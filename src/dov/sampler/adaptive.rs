@@ -28,7 +28,7 @@ use crate::dov::sampling::{halton3, is_inside, seen_by};
 use crate::dov::{DovBackend, PointDov};
 use crate::error::Result;
 use crate::format::sampling::AdaptiveSampling;
-use crate::geom::Aabb;
+use crate::grid::ViewCell;
 
 /// The axes along which a cell's view changes most: those at least half as long as its longest
 /// (a flat 5 × 0.5 × 5 cell refines in x and z only).
@@ -45,14 +45,13 @@ fn long_axes(extent: Vec3) -> Vec<usize> {
 /// `budget`, in the order taken.
 pub fn sample_cell(
     backend: &mut dyn DovBackend,
-    cell: &Aabb,
+    cell: &ViewCell,
     known: &[&PointDov],
     candidates: &HashSet<u32>,
     sampling: &AdaptiveSampling,
     measured: &mut dyn FnMut(),
 ) -> Result<Vec<PointDov>> {
-    let extent = cell.extent();
-    let axes = long_axes(extent);
+    let axes = long_axes(cell.bounds.extent());
     let budget = sampling.budget as usize;
     let mut seen: HashSet<u32> = seen_by(known.iter().copied());
     // Cell-relative positions in [0, 1]³ already taken (the corners included), so that children
@@ -74,7 +73,7 @@ pub fn sample_cell(
             if out.len() >= budget {
                 break;
             }
-            let d = backend.measure(cell.min + u * extent)?;
+            let d = backend.measure(cell.point(u))?;
             measured();
             let before = seen.len();
             if !is_inside(&d) {
@@ -125,7 +124,7 @@ impl CellSampler for Adaptive {
         let candidates = seen_by(cell.nearby.iter().copied());
         let planned = self.0.seeds as usize;
         let mut taken = 0;
-        let extra = sample_cell(backend, &cell.bounds, &known, &candidates, &self.0, &mut || {
+        let extra = sample_cell(backend, &cell.view_cell(), &known, &candidates, &self.0, &mut || {
             taken += 1;
             tally.measured(taken > planned);
         })?;
@@ -174,12 +173,14 @@ mod tests {
         }
     }
 
-    fn cell() -> Aabb {
-        Aabb::new(Vec3::ZERO, Vec3::new(4.0, 0.5, 4.0))
+    use crate::geom::Aabb;
+
+    fn cell() -> ViewCell {
+        ViewCell::whole(Aabb::new(Vec3::ZERO, Vec3::new(4.0, 0.5, 4.0)))
     }
 
     fn corners(b: &mut dyn DovBackend) -> Vec<PointDov> {
-        let c = cell();
+        let c = cell().bounds;
         (0..8)
             .map(|i| {
                 let pick = |bit: usize, a: usize| if i >> bit & 1 == 1 { c.max[a] } else { c.min[a] };

@@ -16,7 +16,7 @@ impl CellSampler for Interior {
 
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
         points.reserve(self.0 as usize);
-        for p in interior_points(&cell.bounds, self.0) {
+        for p in interior_points(&cell.view_cell(), self.0) {
             points.push(backend.measure(p)?);
             tally.measured(false);
         }

@@ -18,7 +18,7 @@ use super::{CubeMap, DovBackend, PointDov};
 use crate::error::Result;
 use crate::format::sampling::Sampling;
 use crate::geom::Aabb;
-use crate::grid::ViewGrid;
+use crate::grid::{ViewCell, ViewGrid};
 use crate::progress::Report;
 
 /// The cell a sampler samples, and what is known of it when the sampler starts.
@@ -27,10 +27,12 @@ pub struct CellSite<'a> {
     pub id: usize,
     /// The cell's coordinates in the grid.
     pub coords: [u32; 3],
-    /// The cell's box.
+    /// The cell's box (its lattice cell's).
     pub bounds: Aabb,
+    /// Where in the box viewers stand ([`ViewCell::places`]).
+    pub places: u64,
     pub grid: &'a ViewGrid,
-    /// The cell's own 8 corners, measured.
+    /// The cell's own corners ([`ViewGrid::view_corners`]), measured.
     pub corners: &'a [&'a PointDov],
     /// The corners of the neighbouring cells within [`CellSampler::corner_ring`] (the widest
     /// ring any sampler of the build asks for), measured; the cell's own corners not included.
@@ -39,6 +41,13 @@ pub struct CellSite<'a> {
     pub object_bounds: &'a [Aabb],
     /// The cube map of the measurements.
     pub cube: &'a CubeMap,
+}
+
+impl CellSite<'_> {
+    /// The cell as its samplers place points in it.
+    pub fn view_cell(&self) -> ViewCell {
+        ViewCell { bounds: self.bounds, places: self.places }
+    }
 }
 
 /// Counts of a shard's work: measurements done and planned (reported as progress as they

@@ -37,6 +37,7 @@ use crate::dov::sampling::{RegionRays, RegionSequence, halton_point, seen_by};
 use crate::dov::{BACK_FACE_BIT, CubeMap, DovBackend, NO_OBJECT, PointDov};
 use crate::error::{Error, Param, Result};
 use crate::format::sampling::RayProbing;
+use crate::grid::ViewCell;
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 
@@ -138,7 +139,7 @@ pub struct Leads<'a> {
 pub fn probe_cell(
     rays: &dyn RayCaster,
     cube: &CubeMap,
-    cell: &Aabb,
+    cell: &ViewCell,
     leads: &Leads,
     bounds: &[Aabb],
     probing: &RayProbing,
@@ -236,7 +237,12 @@ pub fn probe_cell(
 /// The rays are traced sorted by direction (the texels of a 16² cube map), so that one ray
 /// after another meets the same walls and the caster's last hit bounds the next; which ray met
 /// an object first is still its place in the sequence, so the order changes no result.
-pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
+pub fn region_finds(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
+    region_rays_met(caster, cell, sequence).into_iter().map(|(id, (origin, _))| (id, origin)).collect()
+}
+
+/// [`region_finds`] with the whole ray (origin, direction) that met each object first.
+fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, (Vec3, Vec3))> {
     let region = RegionRays::new(cell);
     let rays: Vec<(Vec3, Vec3)> = sequence.points().par_iter().map(|h| region.ray(h)).collect();
     // A counting sort by direction bin (a texel of a 16² cube map), in sequence order within
@@ -260,8 +266,8 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
         (sorted[i], place[i]) = (ray, k as u32);
         start[b as usize] += 1;
     }
-    // Per object, the first ray in sequence order that met it, and that ray's origin.
-    let keep_first = |map: &mut HashMap<u32, (u32, Vec3)>, id: u32, ray: (u32, Vec3)| {
+    // Per object, the first ray in sequence order that met it, and that ray.
+    let keep_first = |map: &mut HashMap<u32, (u32, (Vec3, Vec3))>, id: u32, ray: (u32, (Vec3, Vec3))| {
         let f = map.entry(id).or_insert(ray);
         if ray.0 < f.0 {
             *f = ray;
@@ -271,11 +277,11 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
         .par_chunks(REGION_CHUNK)
         .zip(place.par_chunks(REGION_CHUNK))
         .map(|(rays, places)| {
-            let mut first: HashMap<u32, (u32, Vec3)> = HashMap::new();
+            let mut first: HashMap<u32, (u32, (Vec3, Vec3))> = HashMap::new();
             let ids = caster.first_hits(rays, f32::INFINITY);
-            for ((ray, &k), id) in rays.iter().zip(places).zip(ids) {
+            for ((&ray, &k), id) in rays.iter().zip(places).zip(ids) {
                 if id != NO_OBJECT && id & BACK_FACE_BIT == 0 {
-                    keep_first(&mut first, id, (k, ray.0));
+                    keep_first(&mut first, id, (k, ray));
                 }
             }
             first
@@ -286,10 +292,67 @@ pub fn region_finds(caster: &dyn RayCaster, cell: &Aabb, sequence: &RegionSequen
             }
             a
         });
-    let mut met: Vec<(u32, Vec3)> = first.into_iter().map(|(id, (_, origin))| (id, origin)).collect();
+    let mut met: Vec<(u32, (Vec3, Vec3))> = first.into_iter().map(|(id, (_, ray))| (id, ray)).collect();
     met.sort_unstable_by_key(|m| m.0);
     met
 }
+
+/// [`region_finds`], then rays beside each find: from the origin of the ray that met an object,
+/// rays at [`BORDER_ANGLES`] around its direction, in [`BORDER_AZIMUTHS`] directions, and the
+/// same around each object they meet that nothing met before, round after round, until a round
+/// finds nothing new or `budget` rays are cast (the adaptive border sampling of guided
+/// visibility sampling, Wonka et al. 2006). A gap that one ray went through is seen from that
+/// origin, and what lies beside the ray's hit (the rest of a wall behind a doorway, the floor
+/// beyond a ledge) is seen through it too, where a ray from anywhere else in the cell rarely
+/// passes. Returns the finds in object order and the border rays cast.
+pub fn region_and_border_finds(
+    caster: &dyn RayCaster,
+    cell: &ViewCell,
+    sequence: &RegionSequence,
+    budget: u64,
+) -> (Vec<(u32, Vec3)>, u64) {
+    let mut found: HashMap<u32, (Vec3, Vec3)> = region_rays_met(caster, cell, sequence).into_iter().collect();
+    let mut frontier: Vec<(u32, (Vec3, Vec3))> = found.iter().map(|(&id, &ray)| (id, ray)).collect();
+    frontier.sort_unstable_by_key(|f| f.0);
+    let fan: Vec<(f32, f32)> = BORDER_ANGLES
+        .iter()
+        .flat_map(|&a| {
+            let a = a.to_radians();
+            (0..BORDER_AZIMUTHS).map(move |k| (a, std::f32::consts::TAU * k as f32 / BORDER_AZIMUTHS as f32))
+        })
+        .collect();
+    let mut cast = 0u64;
+    while !frontier.is_empty() && cast < budget {
+        let room = ((budget - cast) / fan.len() as u64).max(1) as usize;
+        frontier.truncate(room);
+        let rays: Vec<(Vec3, Vec3)> = frontier
+            .iter()
+            .flat_map(|&(_, (origin, d))| {
+                let (u, v) = d.any_orthonormal_pair();
+                fan.iter().map(move |&(a, phi)| (origin, (d * a.cos() + (u * phi.cos() + v * phi.sin()) * a.sin()).normalize()))
+            })
+            .collect();
+        cast += rays.len() as u64;
+        let ids: Vec<u32> = rays.par_chunks(REGION_CHUNK).flat_map_iter(|chunk| caster.first_hits(chunk, f32::INFINITY)).collect();
+        let mut next = Vec::new();
+        for (ray, id) in rays.into_iter().zip(ids) {
+            if id != NO_OBJECT && id & BACK_FACE_BIT == 0 && !found.contains_key(&id) {
+                found.insert(id, ray);
+                next.push((id, ray));
+            }
+        }
+        frontier = next;
+    }
+    let mut met: Vec<(u32, Vec3)> = found.into_iter().map(|(id, (origin, _))| (id, origin)).collect();
+    met.sort_unstable_by_key(|m| m.0);
+    (met, cast)
+}
+
+/// Angles (degrees) off a find's ray of the border rays beside it ([`region_and_border_finds`]).
+const BORDER_ANGLES: [f32; 3] = [0.5, 1.5, 4.0];
+
+/// Border rays per angle, evenly around the find's ray.
+const BORDER_AZIMUTHS: u32 = 8;
 
 /// Region rays traced one after another by one thread: enough to share a last hit over many
 /// rays, few enough to spread a cell's rays over the threads.
@@ -441,7 +504,7 @@ impl Probe {
         let cap = (p.region / (p.points * p.rays).max(1)) as usize;
         let mut ring_of: Vec<(u32, u32)> = cell
             .grid
-            .neighbourhood_cells(cell.coords, REGION_RING)
+            .neighbourhood_view_cells(cell.coords, REGION_RING)
             .into_iter()
             .filter(|&n| n != cell.id)
             .flat_map(|n| {
@@ -484,17 +547,16 @@ impl CellSampler for Probe {
         }
         // The neighbours that are view cells: rays from inside a solid would find what no viewer
         // sees.
-        let mut ids: Vec<usize> = cells
-            .iter()
-            .flat_map(|&id| grid.neighbourhood_cells(grid.cell_coords(id), REGION_RING))
-            .filter(|&id| grid.is_present(id))
-            .collect();
+        let mut ids: Vec<usize> =
+            cells.iter().flat_map(|&id| grid.neighbourhood_view_cells(grid.cell_coords(id), REGION_RING)).collect();
         ids.sort_unstable();
         ids.dedup();
         let sequence = RegionSequence::new(self.probing.region);
+        let budget = u64::from(self.probing.region) / 2;
         for id in ids {
-            self.region.insert(id, region_finds(caster, &grid.cell_box(grid.cell_coords(id)), &sequence));
-            tally.probe_rays += u64::from(self.probing.region);
+            let (finds, border) = region_and_border_finds(caster, &grid.view_cell(id), &sequence, budget);
+            self.region.insert(id, finds);
+            tally.probe_rays += u64::from(self.probing.region) + border;
         }
         Ok(())
     }
@@ -513,7 +575,7 @@ impl CellSampler for Probe {
         candidates.sort_unstable();
         let own = self.region.get(&cell.id).map_or(&[][..], Vec::as_slice);
         let leads = Leads { seen: &seen, candidates: &candidates, region: own };
-        let probe = probe_cell(caster, cell.cube, &cell.bounds, &leads, cell.object_bounds, &self.probing);
+        let probe = probe_cell(caster, cell.cube, &cell.view_cell(), &leads, cell.object_bounds, &self.probing);
         tally.probe_rays += probe.rays;
         tally.footprint_rays += probe.footprint_rays;
         points.extend(probe.points);
@@ -548,7 +610,12 @@ mod tests {
         let scene = boxes();
         let cpu = CpuBackend::new(&scene, 16).unwrap();
         let sequence = RegionSequence::new(3000);
-        for cell in [Aabb::new(Vec3::new(-0.5, -0.5, -0.5), Vec3::new(0.5, 0.5, 0.5)), Aabb::new(Vec3::ZERO, Vec3::ONE)] {
+        let half = (0..8).fold(0u64, |m, z| m | 0x0f << (8 * z));
+        for cell in [
+            ViewCell::whole(Aabb::new(Vec3::new(-0.5, -0.5, -0.5), Vec3::new(0.5, 0.5, 0.5))),
+            ViewCell::whole(Aabb::new(Vec3::ZERO, Vec3::ONE)),
+            ViewCell { bounds: Aabb::new(Vec3::ZERO, Vec3::ONE), places: half },
+        ] {
             let region = RegionRays::new(&cell);
             let mut expected: Vec<(u32, Vec3)> = Vec::new();
             for h in sequence.points() {

@@ -137,7 +137,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         scene.grid = Some(scene.view_grid(None, None, Some(args.cell_size), EyeHeights::default())?);
         let (across, cells) = scene.cells_across_walls(args.cell_size, EyeHeights::default())?;
-        println!("{name}: {across} of {cells} view cells hold places to stand on both sides of a wall");
+        println!("{name}: {cells} view cells, {across} lattice cells cut at walls");
         for &parts in &args.objects {
             let row = measure(&args, level.as_ref(), &views, &name, &scene, parts, &work, &mut csv)?;
             print_level(&row);

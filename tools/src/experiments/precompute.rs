@@ -43,13 +43,11 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
         let t = Instant::now();
         let mut points = 0;
         for &id in &cells {
-            let coords = grid.cell_coords(id);
-            let cell_box = grid.cell_box(coords);
             let at: Vec<Vec3> = grid
-                .cell_corners(coords)
+                .view_corners(id)
                 .iter()
                 .map(|&c| grid.corner_position(grid.corner_coords(c)))
-                .chain(interior_points(&cell_box, k_max))
+                .chain(interior_points(&grid.view_cell(id), k_max))
                 .collect();
             points += at.len();
             per_cell.push(at.iter().map(|&p| cpu.measure(p)).collect::<hdov::Result<Vec<_>>>().map_err(err)?);

@@ -89,9 +89,10 @@ pub fn dense_cells(
     let mut corners: HashMap<usize, PointDov> = HashMap::new();
     let mut out = Vec::new();
     for id in cells {
-        let coords = grid.cell_coords(id);
-        let cell = grid.cell_box(coords);
-        for c in grid.cell_corners(coords) {
+        // Where the cell's viewers stand: its corners on their side, points among its places.
+        let cell = grid.view_cell(id);
+        let own = grid.view_corners(id);
+        for &c in &own {
             if let Entry::Vacant(slot) = corners.entry(c) {
                 slot.insert(backend.measure(grid.corner_position(grid.corner_coords(c)))?);
             }
@@ -99,8 +100,8 @@ pub fn dense_cells(
         let interior: Vec<PointDov> = (DENSE_HALTON_START..DENSE_HALTON_START + dense)
             .map(|k| backend.measure(halton_point(&cell, k)))
             .collect::<Result<_>>()?;
-        let points: Vec<&PointDov> = grid.cell_corners(coords).iter().map(|c| &corners[c]).chain(&interior).collect();
-        out.push(cell_dov(&points, &[], &cell, object_bounds, shape, &options, &cube));
+        let points: Vec<&PointDov> = own.iter().map(|c| &corners[c]).chain(&interior).collect();
+        out.push(cell_dov(&points, &[], &cell.bounds, object_bounds, shape, &options, &cube));
     }
     Ok(out)
 }
@@ -166,11 +167,11 @@ pub fn audit_zero_dov(
                 slot.insert(seen_from(grid.corner_position(grid.corner_coords(c)))?);
             }
         }
-        let own = grid.cell_corners(coords);
+        let own = grid.view_corners(id);
         let by_corner: HashSet<u32> = own.iter().flat_map(|c| &corner_seen[c]).copied().collect();
         let around: HashSet<u32> = hood.iter().flat_map(|c| &corner_seen[c]).copied().collect();
         let interior: Vec<HashSet<u32>> =
-            interior_points(&cell_box, dense).into_iter().map(&mut seen_from).collect::<Result<_>>()?;
+            interior_points(&grid.view_cell(id), dense).into_iter().map(&mut seen_from).collect::<Result<_>>()?;
         let by_dense: HashSet<u32> = interior.iter().flatten().chain(&by_corner).copied().collect();
         for audit in &mut audits {
             let k = (audit.interior_samples as usize).min(interior.len());
