@@ -238,11 +238,12 @@ pub fn probe_cell(
 /// after another meets the same walls and the caster's last hit bounds the next; which ray met
 /// an object first is still its place in the sequence, so the order changes no result.
 pub fn region_finds(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
-    region_rays_met(caster, cell, sequence).into_iter().map(|(id, (origin, _))| (id, origin)).collect()
+    region_rays_met(caster, cell, sequence).into_iter().map(|(id, (origin, _), _)| (id, origin)).collect()
 }
 
-/// [`region_finds`] with the whole ray (origin, direction) that met each object first.
-fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, (Vec3, Vec3))> {
+/// [`region_finds`] with the whole ray (origin, direction) that met each object first, and how
+/// many rays met it.
+fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, (Vec3, Vec3), u32)> {
     let region = RegionRays::new(cell);
     let rays: Vec<(Vec3, Vec3)> = sequence.points().par_iter().map(|h| region.ray(h)).collect();
     // A counting sort by direction bin (a texel of a 16² cube map), in sequence order within
@@ -266,22 +267,24 @@ fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSeq
         (sorted[i], place[i]) = (ray, k as u32);
         start[b as usize] += 1;
     }
-    // Per object, the first ray in sequence order that met it, and that ray.
-    let keep_first = |map: &mut HashMap<u32, (u32, (Vec3, Vec3))>, id: u32, ray: (u32, (Vec3, Vec3))| {
-        let f = map.entry(id).or_insert(ray);
+    // Per object, the first ray in sequence order that met it, that ray, and the rays that did.
+    type First = (u32, (Vec3, Vec3), u32);
+    let keep_first = |map: &mut HashMap<u32, First>, id: u32, ray: First| {
+        let f = map.entry(id).or_insert((ray.0, ray.1, 0));
+        f.2 += ray.2;
         if ray.0 < f.0 {
-            *f = ray;
+            (f.0, f.1) = (ray.0, ray.1);
         }
     };
     let first = sorted
         .par_chunks(REGION_CHUNK)
         .zip(place.par_chunks(REGION_CHUNK))
         .map(|(rays, places)| {
-            let mut first: HashMap<u32, (u32, (Vec3, Vec3))> = HashMap::new();
+            let mut first: HashMap<u32, First> = HashMap::new();
             let ids = caster.first_hits(rays, f32::INFINITY);
             for ((&ray, &k), id) in rays.iter().zip(places).zip(ids) {
                 if id != NO_OBJECT && id & BACK_FACE_BIT == 0 {
-                    keep_first(&mut first, id, (k, ray));
+                    keep_first(&mut first, id, (k, ray, 1));
                 }
             }
             first
@@ -292,12 +295,13 @@ fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSeq
             }
             a
         });
-    let mut met: Vec<(u32, (Vec3, Vec3))> = first.into_iter().map(|(id, (_, ray))| (id, ray)).collect();
+    let mut met: Vec<(u32, (Vec3, Vec3), u32)> = first.into_iter().map(|(id, (_, ray, n))| (id, ray, n)).collect();
     met.sort_unstable_by_key(|m| m.0);
     met
 }
 
-/// [`region_finds`], then rays beside each find: from the origin of the ray that met an object,
+/// [`region_finds`], then rays beside each rare find (met by at most [`BORDER_RARE_HITS`] rays):
+/// from the origin of the ray that met an object,
 /// rays at [`BORDER_ANGLES`] around its direction, in [`BORDER_AZIMUTHS`] directions, and the
 /// same around each object they meet that nothing met before, round after round, until a round
 /// finds nothing new or `budget` rays are cast (the adaptive border sampling of guided
@@ -311,9 +315,11 @@ pub fn region_and_border_finds(
     sequence: &RegionSequence,
     budget: u64,
 ) -> (Vec<(u32, Vec3)>, u64) {
-    let mut found: HashMap<u32, (Vec3, Vec3)> = region_rays_met(caster, cell, sequence).into_iter().collect();
-    let mut frontier: Vec<(u32, (Vec3, Vec3))> = found.iter().map(|(&id, &ray)| (id, ray)).collect();
-    frontier.sort_unstable_by_key(|f| f.0);
+    let met = region_rays_met(caster, cell, sequence);
+    // Rays beside an object that many rays met would find what those rays found around it.
+    let mut frontier: Vec<(u32, (Vec3, Vec3))> =
+        met.iter().filter(|m| m.2 <= BORDER_RARE_HITS).map(|&(id, ray, _)| (id, ray)).collect();
+    let mut found: HashMap<u32, (Vec3, Vec3)> = met.into_iter().map(|(id, ray, _)| (id, ray)).collect();
     let fan: Vec<(f32, f32)> = BORDER_ANGLES
         .iter()
         .flat_map(|&a| {
@@ -347,6 +353,10 @@ pub fn region_and_border_finds(
     met.sort_unstable_by_key(|m| m.0);
     (met, cast)
 }
+
+/// Finds met by at most this many region rays get border rays: seen from little of the cell or
+/// through a gap.
+const BORDER_RARE_HITS: u32 = 2;
 
 /// Angles (degrees) off a find's ray of the border rays beside it ([`region_and_border_finds`]).
 const BORDER_ANGLES: [f32; 3] = [0.5, 1.5, 4.0];

@@ -20,7 +20,8 @@
 //! bit vectors mark visible from the viewpoint's cluster) and against the triangles seen from
 //! the viewpoint (a full id cube map of every triangle at `--truth` texels per edge, by the CPU
 //! tracer); the wrong share (solid angle of texels whose object the naive answer lacks, over all
-//! texels that show a surface) as mean, p99 and max.
+//! texels that show a surface) as mean, p99 and max; and how many of the missed texels lie in
+//! features one texel wide (hairline cracks and slivers, which no sampling of a cell finds).
 
 use std::collections::HashSet;
 use std::io::Write;
@@ -101,6 +102,9 @@ struct LevelRow {
     /// Per answered viewpoint: default answer faces, naive faces, PVS faces, seen triangles,
     /// wrong share.
     answered: Vec<[f64; 5]>,
+    /// Texels of the truth the naive answers lack, and of them those in features one texel
+    /// wide ([`thin_misses`]), over all viewpoints.
+    missed_texels: [usize; 2],
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -225,6 +229,7 @@ fn measure(
         viewpoints: views.len(),
         refused: 0,
         answered: Vec::new(),
+        missed_texels: [0, 0],
     };
     for (k, (class, eye)) in views.iter().enumerate() {
         let pvs = level.and_then(|l| l.cluster_at(*eye).map(|c| l.pvs_triangles(c) as f64)).unwrap_or(f64::NAN);
@@ -247,8 +252,12 @@ fn measure(
         let has: HashSet<u32> = naive.items.iter().filter(|i| i.kind == ItemKind::Object).map(|i| i.id).collect();
         let lacking = wrong_share(&ids, &cube, |t| has.contains(&parent[t as usize]));
         let wrong = lacking.share();
+        let [missed, thin] = thin_misses(&ids, args.truth as usize, |t| has.contains(&parent[t as usize]));
+        row.missed_texels[0] += missed;
+        row.missed_texels[1] += thin;
         if args.explain.is_some_and(|bound| wrong > bound) {
             explain(&measured, &grid, *eye, &lacking, &parent);
+            println!("    {thin} of its {missed} missed texels lie in features one texel wide");
         }
         let faces = |a: &hdov::Answer| a.items.iter().map(|i| f64::from(i.faces)).sum::<f64>();
         let m = [faces(&answer), faces(&naive), pvs, seen.len() as f64, wrong];
@@ -318,6 +327,26 @@ fn print_level(r: &LevelRow) {
         "{} (--objects {}): {} triangles, {} objects, {} view cells (lattice {}), built in {:.1} s; {} viewpoints, {} refused",
         r.name, r.parts, r.triangles, r.objects, r.cells, r.lattice, r.build_s, r.viewpoints, r.refused
     );
+    let [missed, thin] = r.missed_texels;
+    println!("  {thin} of the {missed} texels its answers missed lie in features one texel wide");
+}
+
+/// Of the texels of `ids` (a cube map of `r` texels a side, by triangle) whose triangle `has`
+/// does not take, how many there are, and how many lie in a feature one texel wide: their
+/// neighbours on both sides along the row or along the column are not missed. A hairline crack
+/// between faces, or a sliver, shows as such single texels and lines; a gap a viewer sees
+/// through does not.
+fn thin_misses(ids: &IdCube, r: usize, has: impl Fn(u32) -> bool) -> [usize; 2] {
+    let missed = |t: usize| ids.object_at(t).is_some_and(|tri| !has(tri));
+    let (mut all, mut thin) = (0, 0);
+    for t in (0..ids.ids.len()).filter(|&t| missed(t)) {
+        let (row, col) = (t % (r * r) / r, t % r);
+        let across = col > 0 && col + 1 < r && !missed(t - 1) && !missed(t + 1);
+        let along = row > 0 && row + 1 < r && !missed(t - r) && !missed(t + r);
+        all += 1;
+        thin += usize::from(across || along);
+    }
+    [all, thin]
 }
 
 fn print_table(rows: &[LevelRow]) {
