@@ -5,7 +5,9 @@
 //!
 //! Coordinates become hdov's: y up (Quake's z), in metres at [`METRES_PER_UNIT`]. Bézier
 //! patches are tessellated at [`PATCH_STEPS`] steps per side of each 3 × 3 piece, both for the
-//! scene and for counting the faces of the PVS, so that the two counts are of one geometry.
+//! scene and for counting the faces of the PVS, so that the two counts are of one geometry;
+//! then every edge that another triangle's vertex lies on is split there
+//! ([`Level::close_t_junctions`]), so that no hairline crack shows what lies behind a wall.
 
 use std::collections::HashMap;
 
@@ -191,7 +193,76 @@ impl Level {
                 level.face_of.push(face as u32);
             }
         }
+        level.close_t_junctions();
         Ok(level)
+    }
+
+    /// Splits every triangle edge that another triangle's vertex lies on (within
+    /// [`T_JUNCTION_TOLERANCE`]). The game's compiler closes the T-junctions of its brush faces,
+    /// but a curved patch tessellated here meets the faces around it at vertices they lack, and
+    /// the hairline crack along such an edge shows what lies behind a wall as a line of single
+    /// texels. A triangle takes at most [`T_JUNCTION_SPLITS`] splits (else it stays whole), and
+    /// a sliver narrower than the tolerance is not split (every vertex near it is near each of
+    /// its edges).
+    fn close_t_junctions(&mut self) {
+        let tol = T_JUNCTION_TOLERANCE;
+        let cell = 0.5f32;
+        let key = |p: Vec3| (p / cell).floor().as_ivec3();
+        let mut hash: HashMap<glam::IVec3, Vec<Vec3>> = HashMap::new();
+        for t in &self.triangles {
+            for &v in t {
+                let bucket = hash.entry(key(v)).or_default();
+                if !bucket.iter().any(|&q| q.distance_squared(v) <= tol * tol) {
+                    bucket.push(v);
+                }
+            }
+        }
+        // The vertex nearest `a` strictly inside edge a–b and apart from `corners`, if any.
+        let on_edge = |a: Vec3, b: Vec3, corners: &[Vec3; 3]| -> Option<Vec3> {
+            let d = b - a;
+            let len2 = d.length_squared();
+            let steps = (len2.sqrt() / (0.5 * cell)).ceil() as i32;
+            let mut keys: Vec<glam::IVec3> = (0..=steps)
+                .flat_map(|k| {
+                    let c = key(a + d * (k as f32 / steps.max(1) as f32));
+                    (0..27).map(move |n| c + glam::IVec3::new(n % 3 - 1, n / 3 % 3 - 1, n / 9 - 1))
+                })
+                .collect();
+            keys.sort_unstable_by_key(|k| (k.x, k.y, k.z));
+            keys.dedup();
+            keys.iter()
+                .flat_map(|k| hash.get(k))
+                .flatten()
+                .filter(|&&v| corners.iter().all(|&c| c.distance_squared(v) > tol * tol))
+                .map(|&v| ((v - a).dot(d) / len2, v))
+                .filter(|&(s, v)| s > 0.0 && s < 1.0 && (a + d * s).distance_squared(v) <= tol * tol)
+                .min_by(|p, q| p.0.total_cmp(&q.0))
+                .map(|(_, v)| v)
+        };
+        let triangles = std::mem::take(&mut self.triangles);
+        let faces = std::mem::take(&mut self.face_of);
+        for (whole, face) in triangles.into_iter().zip(faces) {
+            let (mut todo, mut done, mut splits) = (vec![whole], Vec::new(), 0);
+            while let Some(t) = todo.pop() {
+                let longest = (0..3).map(|e| t[e].distance(t[(e + 1) % 3])).fold(0.0, f32::max);
+                let sliver = (t[1] - t[0]).cross(t[2] - t[0]).length() <= tol * longest;
+                let split =
+                    if sliver { None } else { (0..3).find_map(|e| on_edge(t[e], t[(e + 1) % 3], &t).map(|v| (e, v))) };
+                match split {
+                    Some((e, v)) => {
+                        let (a, b, c) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+                        todo.extend([[v, b, c], [a, v, c]]);
+                        splits += 1;
+                        if splits > T_JUNCTION_SPLITS {
+                            (todo, done) = (Vec::new(), vec![whole]);
+                        }
+                    }
+                    None => done.push(t),
+                }
+            }
+            self.face_of.extend(std::iter::repeat_n(face, done.len()));
+            self.triangles.extend(done);
+        }
     }
 
     /// The cluster of the leaf holding `p` (hdov's coordinates), `None` in solid or outside.
@@ -247,6 +318,13 @@ impl Level {
         out.into_iter().map(|(s, t)| (self.shaders[s as usize].clone(), t)).collect()
     }
 }
+
+/// How near an edge (metres) a vertex counts as on it ([`Level::close_t_junctions`]): 1/16 of a
+/// Quake unit.
+const T_JUNCTION_TOLERANCE: f32 = METRES_PER_UNIT / 16.0;
+
+/// Most splits one triangle takes closing T-junctions.
+const T_JUNCTION_SPLITS: usize = 64;
 
 /// A patch's triangles: each 3 × 3 piece of its `size` control points as a biquadratic Bézier
 /// surface, [`PATCH_STEPS`] steps a side.
@@ -342,6 +420,35 @@ mod tests {
         assert_eq!(t.len(), 2 * PATCH_STEPS * PATCH_STEPS);
         assert!(t.iter().flatten().all(|v| v.0.z == 0.0 && v.0.x <= 2.0 && v.0.y <= 2.0));
         assert!(patch(&verts, [2, 3]).is_err());
+    }
+
+    /// A triangle whose edge runs past a vertex of the two triangles beside it is split there,
+    /// keeping its face, its winding and its area; the others stay as they are.
+    #[test]
+    fn t_junctions_are_closed() {
+        let v = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+        let big = [v(0.0, 0.0), v(2.0, 0.0), v(0.0, 2.0)];
+        let small = [[v(0.0, 0.0), v(1.0, -1.0), v(1.0, 0.0)], [v(1.0, 0.0), v(1.0, -1.0), v(2.0, 0.0)]];
+        let mut level = Level {
+            triangles: vec![big, small[0], small[1]],
+            face_of: vec![7, 8, 8],
+            shader_of_face: Vec::new(),
+            shaders: Vec::new(),
+            places: Vec::new(),
+            planes: Vec::new(),
+            nodes: Vec::new(),
+            leafs: Vec::new(),
+            leaf_faces: Vec::new(),
+            vis: None,
+        };
+        level.close_t_junctions();
+        let area = |t: &[Vec3; 3]| (t[1] - t[0]).cross(t[2] - t[0]);
+        let of_big: Vec<&[Vec3; 3]> =
+            level.triangles.iter().zip(&level.face_of).filter(|p| *p.1 == 7).map(|p| p.0).collect();
+        assert_eq!(of_big.len(), 2);
+        assert!(of_big.iter().all(|t| t.contains(&v(1.0, 0.0)) && area(t).z > 0.0));
+        assert!((of_big.iter().map(|t| area(t).z).sum::<f32>() - area(&big).z).abs() < 1e-6);
+        assert_eq!(level.triangles.len(), 4);
     }
 
     #[test]
