@@ -374,10 +374,14 @@ fn print_cells(db: &Database, json: bool) -> Result<()> {
     for id in grid.present_ids() {
         let cell = grid.cell_coords(id);
         let b = grid.cell_box(cell);
+        // Where in the box viewers stand: bit z·8 + x of its 8 × 8 squares (hex; the parts of a
+        // cell that a wall cuts share the box and differ here).
+        let places = format!("{:016x}", grid.places_of(id));
         let line = if json {
-            serde_json::json!({ "id": id, "cell": cell, "min": b.min.to_array(), "max": b.max.to_array() }).to_string()
+            serde_json::json!({ "id": id, "cell": cell, "min": b.min.to_array(), "max": b.max.to_array(), "places": places })
+                .to_string()
         } else {
-            format!("{id} {cell:?} {:?} {:?}", b.min.to_array(), b.max.to_array())
+            format!("{id} {cell:?} {:?} {:?} {places}", b.min.to_array(), b.max.to_array())
         };
         if writeln!(out, "{line}").is_err() {
             break;
