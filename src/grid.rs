@@ -286,13 +286,10 @@ impl ViewGrid {
         let mut last: Option<(u32, u64)> = None;
         for p in &self.parts {
             let id = p.cell as usize;
-            let Some(own) = self.places.as_ref().filter(|_| self.is_present(id) && id < self.lattice_count()).map(|places| {
-                let set = self.present.as_ref().expect("places come with view cells");
-                places[set.rank(id)]
-            }) else {
+            if self.places.is_none() || id >= self.lattice_count() || !self.is_present(id) {
                 return Err(format!("a part of cell {id}, which is no view cell with places"));
-            };
-            let taken = own | last.filter(|l| l.0 == p.cell).map_or(0, |l| l.1);
+            }
+            let taken = self.places_of(id) | last.filter(|l| l.0 == p.cell).map_or(0, |l| l.1);
             if p.places == 0 || p.places & taken != 0 || last.is_some_and(|l| l.0 > p.cell) {
                 return Err(format!("a part of cell {id} is empty, overlaps its cell's squares or is out of order"));
             }
@@ -310,9 +307,13 @@ impl ViewGrid {
         if places.get(set.rank(id))? & bit != 0 {
             return Some(id);
         }
+        self.parts_of_cell(id).find(|&k| self.parts[k].places & bit != 0).map(|k| self.lattice_count() + k)
+    }
+
+    /// The indices in [`ViewGrid::parts`] of lattice cell `id`'s further parts.
+    fn parts_of_cell(&self, id: usize) -> std::ops::Range<usize> {
         let first = self.parts.partition_point(|q| (q.cell as usize) < id);
-        let k = self.parts[first..].iter().take_while(|q| q.cell as usize == id).position(|q| q.places & bit != 0)?;
-        Some(self.lattice_count() + first + k)
+        first..first + self.parts[first..].iter().take_while(|q| q.cell as usize == id).count()
     }
 
     /// View cell `id` as samplers see it.
@@ -483,12 +484,7 @@ impl ViewGrid {
         let mut out: Vec<usize> = self.neighbourhood_cells(c, ring).into_iter().filter(|&id| self.is_present(id)).collect();
         if !self.parts.is_empty() {
             let lattice = self.lattice_count();
-            let parts = out.iter().flat_map(|&id| {
-                let first = self.parts.partition_point(|q| (q.cell as usize) < id);
-                let n = self.parts[first..].iter().take_while(|q| q.cell as usize == id).count();
-                (first..first + n).map(move |k| lattice + k)
-            });
-            let parts: Vec<usize> = parts.collect();
+            let parts: Vec<usize> = out.iter().flat_map(|&id| self.parts_of_cell(id)).map(|k| lattice + k).collect();
             out.extend(parts);
         }
         out

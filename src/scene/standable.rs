@@ -332,7 +332,6 @@ fn eye_cells<'g>(
     (first..end.max(first + 1)).map(move |y| grid.cell_id([x, y, z]))
 }
 
-
 /// The height of triangle `t` over `(x, z)`, if its footprint holds the point, edges included
 /// with a margin of [`EDGE`]: a line through the shared edge of two triangles (the diagonal of a
 /// quad, met exactly by lines on a regular spacing) must not fall through the crack that rounding

@@ -37,9 +37,8 @@ use crate::dov::sampling::{RegionRays, RegionSequence, halton_point, seen_by};
 use crate::dov::{BACK_FACE_BIT, CubeMap, DovBackend, NO_OBJECT, PointDov};
 use crate::error::{Error, Param, Result};
 use crate::format::sampling::RayProbing;
-use crate::grid::ViewCell;
 use crate::geom::Aabb;
-use crate::grid::ViewGrid;
+use crate::grid::{ViewCell, ViewGrid};
 
 /// How far past its target a probe ray looks, in lengths of the ray to the target: the target lies
 /// on the object's surface, so a ray that meets the object meets it by then (the margin is for

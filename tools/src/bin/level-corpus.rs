@@ -250,9 +250,10 @@ fn measure(
         truth.render_ids(*eye, &mut ids)?;
         let seen: HashSet<u32> = (0..ids.ids.len()).filter_map(|t| ids.object_at(t)).collect();
         let has: HashSet<u32> = naive.items.iter().filter(|i| i.kind == ItemKind::Object).map(|i| i.id).collect();
-        let lacking = wrong_share(&ids, &cube, |t| has.contains(&parent[t as usize]));
+        let answered = |t: u32| has.contains(&parent[t as usize]);
+        let lacking = wrong_share(&ids, &cube, answered);
         let wrong = lacking.share();
-        let [missed, thin] = thin_misses(&ids, args.truth as usize, |t| has.contains(&parent[t as usize]));
+        let [missed, thin] = thin_misses(&ids, answered);
         row.missed_texels[0] += missed;
         row.missed_texels[1] += thin;
         if args.explain.is_some_and(|bound| wrong > bound) {
@@ -331,12 +332,13 @@ fn print_level(r: &LevelRow) {
     println!("  {thin} of the {missed} texels its answers missed lie in features one texel wide");
 }
 
-/// Of the texels of `ids` (a cube map of `r` texels a side, by triangle) whose triangle `has`
+/// Of the texels of `ids` (a cube map by triangle) whose triangle `has`
 /// does not take, how many there are, and how many lie in a feature one texel wide: their
 /// neighbours on both sides along the row or along the column are not missed. A hairline crack
 /// between faces, or a sliver, shows as such single texels and lines; a gap a viewer sees
 /// through does not.
-fn thin_misses(ids: &IdCube, r: usize, has: impl Fn(u32) -> bool) -> [usize; 2] {
+fn thin_misses(ids: &IdCube, has: impl Fn(u32) -> bool) -> [usize; 2] {
+    let r = ids.resolution as usize;
     let missed = |t: usize| ids.object_at(t).is_some_and(|tri| !has(tri));
     let (mut all, mut thin) = (0, 0);
     for t in (0..ids.ids.len()).filter(|&t| missed(t)) {
