@@ -59,6 +59,8 @@ pub enum Param {
     EyeHeights,
     /// A query or session camera.
     Camera,
+    /// A view cell, by id.
+    Cell,
     /// The viewing cells' size.
     CellSize,
     /// How V-entries store DoV.
@@ -91,6 +93,8 @@ pub enum Param {
     Lods,
     /// A near-plane distance.
     Near,
+    /// A query's mode.
+    Mode,
     /// Bytes per page.
     PageSize,
     /// A walk's path of viewpoints.
@@ -107,6 +111,8 @@ pub enum Param {
     Resolution,
     /// REVIEW's disk-cell scale.
     ReviewBox,
+    /// The matrix a 3D Tiles export puts on its root tile.
+    RootTransform,
     /// Sample points handed to the per-cell combination.
     Samples,
     /// The city generator's scale.
@@ -138,6 +144,7 @@ impl Param {
             Param::Blocks => "blocks",
             Param::EyeHeights => "eye_heights",
             Param::Camera => "camera",
+            Param::Cell => "cell",
             Param::CellSize => "cell_size",
             Param::DovCodec => "dov_codec",
             Param::Eta => "eta",
@@ -169,6 +176,8 @@ impl Param {
             Param::Shard => "shard",
             Param::Shards => "shards",
             Param::Size => "size",
+            Param::Mode => "mode",
+            Param::RootTransform => "root_transform",
             Param::Tau => "tau",
             Param::TreeShape => "tree shape",
             Param::ZeroDovFloor => "zero_dov_floor",

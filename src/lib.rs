@@ -72,6 +72,7 @@ pub use db::Database;
 pub use db::info::Info;
 pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Param, Result};
+pub use export::tiles;
 pub use export::{lod_glb, scene_items, write_answer_glb, write_scene_glb};
 pub use format::Manifest;
 pub use format::catalog::LodRef;
@@ -85,7 +86,8 @@ pub use hdov_storage::{CacheLimits, DovCodec, Error as StorageError, LayoutKind,
 pub use overwrite::Overwrite;
 pub use progress::Progress;
 pub use query::{
-    Answer, DEFAULT_ETA, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session, SessionParams, Step,
+    Answer, CellVisibility, DEFAULT_ETA, Item, ItemKind, LodRule, Mode, QueryParams, QueryStats, Session,
+    SessionParams, Step,
 };
 pub use rtree::TreeAlgorithm;
 pub use scene::standable::EyeHeights;

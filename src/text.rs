@@ -51,6 +51,11 @@ pub fn parse_box(s: &str) -> Result<Aabb, String> {
     Ok(b)
 }
 
+/// 16 numbers, a column-major 4 × 4 matrix.
+pub fn parse_matrix(s: &str) -> Result<glam::Mat4, String> {
+    floats(s, 16, "a column-major 4x4 matrix").map(|v| glam::Mat4::from_cols_slice(&v))
+}
+
 /// `LOW,HIGH`: eye heights above a floor (checked when a grid is made from them).
 pub fn parse_eye_heights(s: &str) -> Result<EyeHeights, String> {
     floats(s, 2, "eye heights LOW,HIGH").map(|v| EyeHeights { low: v[0], high: v[1] })

@@ -45,6 +45,25 @@ fn generate_build_info_round_trip() {
     let o = hdov(&["build", scene.to_str().unwrap(), "--out", db.to_str().unwrap()]);
     assert_refused(&o, "exists; pass --force to replace it");
     assert!(hdov(&["info", db.to_str().unwrap()]).status.success());
+    // The 3D Tiles export, under a root transform (a move of 100 along x), never over itself.
+    let tiles = tmp.path().join("tiles");
+    let shift = "1,0,0,0,0,1,0,0,0,0,1,0,100,0,0,1";
+    let o = hdov(&["export", db.to_str().unwrap(), "--3dtiles", tiles.to_str().unwrap(), "--root-transform", shift]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("tiles"), "{}", String::from_utf8_lossy(&o.stdout));
+    let set: serde_json::Value = serde_json::from_slice(&std::fs::read(tiles.join("tileset.json")).unwrap()).unwrap();
+    assert_eq!(set["root"]["transform"][12], 100.0);
+    let o = hdov(&["export", db.to_str().unwrap(), "--3dtiles", tiles.to_str().unwrap()]);
+    assert_refused(&o, "exists");
+    let o = hdov(&[
+        "export",
+        db.to_str().unwrap(),
+        "--3dtiles",
+        tmp.path().join("t2").to_str().unwrap(),
+        "--root-transform",
+        "1,0,0",
+    ]);
+    assert!(!o.status.success() && !tmp.path().join("t2").exists(), "16 numbers or none");
 }
 
 /// `--samples probe` builds with both backends (the GPU backend's rays by a CPU backend of the

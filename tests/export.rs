@@ -3,7 +3,6 @@
 //! `gltf-validator` package are there, as `.ci/run` makes them), and never overwrite a file.
 
 use std::path::Path;
-use std::process::Command;
 
 use hdov::city::CityParams;
 use hdov::{BackendKind, BuildParams, Database, Overwrite, Progress, QueryParams, Scene, VisibilityParams};
@@ -15,22 +14,7 @@ fn tiny_city(dir: &Path) -> (Scene, Database) {
 
 /// The validator's error and warning counts for `file`; `None` without node or the package.
 fn validate(file: &Path) -> Option<(u64, u64, String)> {
-    let root = Command::new("npm").args(["root", "-g"]).output().ok()?;
-    let node_path = String::from_utf8_lossy(&root.stdout).trim().to_string();
-    let script = r#"
-        const fs = require('fs');
-        const v = require('gltf-validator');
-        v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[1])), { maxIssues: 20 })
-          .then((r) => console.log(JSON.stringify({ e: r.issues.numErrors, w: r.issues.numWarnings, m: r.issues.messages })))
-          .catch((e) => { console.error(String(e)); process.exit(3); });
-    "#;
-    let out =
-        Command::new("node").args(["-e", script, file.to_str().unwrap()]).env("NODE_PATH", node_path).output().ok()?;
-    if !out.status.success() {
-        return None;
-    }
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).ok()?;
-    Some((report["e"].as_u64()?, report["w"].as_u64()?, report["m"].to_string()))
+    hdov_testkit::testdata::gltf_validator(&[file.to_path_buf()])?.pop()
 }
 
 #[test]

@@ -227,6 +227,22 @@ fn routes_answer_what_the_library_answers() {
         get(addr, "/walk?path=1,2;3,4,5").error(),
         "path: step 0: expected 3 comma-separated numbers for a point X,Y,Z, got 2 in '1,2'"
     );
+
+    // /tiles/ serves what `hdov export --3dtiles` writes, byte for byte, and nothing else.
+    let exported = tmp.path().join("tiles");
+    hdov::tiles::write_tileset(&db, &exported, None, &hdov::Progress::hidden()).unwrap();
+    let set: Value = serde_json::from_slice(&std::fs::read(exported.join("tileset.json")).unwrap()).unwrap();
+    let content = set["root"]["content"]["uri"].as_str().unwrap().to_string();
+    for file in ["tileset.json".to_string(), "visibility/index.json".into(), content, hdov::tiles::cell_file(3)] {
+        let r = get(addr, &format!("/tiles/{file}"));
+        assert_eq!(r.status, 200, "{file}");
+        assert_eq!(r.body, std::fs::read(exported.join(&file)).unwrap(), "{file}");
+    }
+    let cells = db.grid().unwrap().cell_count();
+    for wrong in ["/tiles/content/n0-99.glb", "/tiles/visibility/cells/03.bin", "/tiles/../manifest.json"] {
+        assert_eq!(get(addr, wrong).status, 404, "{wrong}");
+    }
+    assert_eq!(get(addr, &format!("/tiles/visibility/cells/{cells}.bin")).status, 404);
 }
 
 #[test]

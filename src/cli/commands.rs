@@ -7,7 +7,7 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 
 use hdov::city::{CityParams, CityScale};
-use hdov::text::{parse_box, parse_dims, parse_eye_heights};
+use hdov::text::{parse_box, parse_dims, parse_eye_heights, parse_matrix};
 use hdov::{
     Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, EyeHeights, FloorTest, Info, InternalLods,
     LayoutKind, LodParams, Manifest, ObjectParts, Overwrite, Param, Progress, Result, Sampling, Scene, Shard,
@@ -219,18 +219,45 @@ pub struct InfoArgs {
 pub struct ExportArgs {
     db: PathBuf,
     /// The glTF binary to write (.glb); an existing file is refused.
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "tiles", conflicts_with = "tiles")]
+    out: Option<PathBuf>,
     /// The level of detail of every object (0 = full detail; an object's coarsest where its chain
     /// is shorter).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, conflicts_with = "tiles")]
     lod: u32,
+    /// Write the database as a 3D Tiles 1.1 tileset into this new directory instead: a tile per
+    /// stored level, each content file once, and every view cell's visibility beside it
+    /// (docs/format.md, "3D Tiles").
+    #[arg(long = "3dtiles", value_name = "DIR")]
+    tiles: Option<PathBuf>,
+    /// The root tile's transform, 16 numbers, column-major, applied after the turn to 3D Tiles'
+    /// z-up (e.g. an east-north-up frame on the globe).
+    #[arg(long, value_parser = parse_matrix, allow_hyphen_values = true, requires = "tiles")]
+    root_transform: Option<glam::Mat4>,
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 pub fn export(a: ExportArgs) -> Result<()> {
     let db = Database::open(&a.db)?;
-    hdov::write_scene_glb(&db, a.lod, &a.out)?;
-    println!("{}: {} objects at LOD {} as glTF", a.out.display(), db.catalog().objects.len(), a.lod);
+    if let Some(dir) = &a.tiles {
+        let r = hdov::tiles::write_tileset(&db, dir, a.root_transform, &Progress::for_terminal(a.quiet))?;
+        println!(
+            "{}: {} tiles, {} content files ({:.1} MB), tileset.json {:.1} kB, visibility of {} cells {:.1} kB ({:.2} % of the content)",
+            dir.display(),
+            r.tiles,
+            r.contents,
+            r.content_bytes as f64 / 1e6,
+            r.tileset_bytes as f64 / 1e3,
+            r.cells,
+            r.visibility_bytes as f64 / 1e3,
+            100.0 * r.visibility_bytes as f64 / r.content_bytes.max(1) as f64
+        );
+        return Ok(());
+    }
+    let out = a.out.expect("clap requires --out without --3dtiles");
+    hdov::write_scene_glb(&db, a.lod, &out)?;
+    println!("{}: {} objects at LOD {} as glTF", out.display(), db.catalog().objects.len(), a.lod);
     Ok(())
 }
 

@@ -131,12 +131,14 @@ fn flag_of(param: Param) -> &'static str {
         Param::Layout => "--layout",
         Param::Layouts => "--layouts",
         Param::LodDrawTolerance => "--lod-draw-tolerance",
+        Param::Mode => "--mode",
         Param::PageSize => "--page-size",
         Param::Path => "--path",
         Param::Region => "--region",
         Param::Render => "render",
         Param::Resolution => "--resolution",
         Param::ReviewBox => "--review-box",
+        Param::RootTransform => "--root-transform",
         Param::Scale => "--scale",
         Param::Scene => "SCENE",
         Param::Base => "--base",
@@ -146,7 +148,8 @@ fn flag_of(param: Param) -> &'static str {
         Param::Tau => "--tau",
         Param::ZeroDovFloor => "--zero-dov-floor",
         // Set by no flag: the library's own inputs, named as the library names them.
-        Param::IdCube
+        Param::Cell
+        | Param::IdCube
         | Param::LodRatio
         | Param::Lods
         | Param::Near

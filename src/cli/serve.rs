@@ -4,7 +4,8 @@
 //! Routes: `/info`, `/query?at=…`, `/walk?path=…` (a session over a path: per step, what to load
 //! and what to drop), `/mesh/{offset}-{crc}.glb` (one stored LOD level, immutable: the URL names
 //! the record and its checksum), `/scene` (every object at full detail, the viewer's "full
-//! scene"), `/recorded-walk?kind=…` and the viewer's files. Safe by default: loopback unless
+//! scene"), `/recorded-walk?kind=…`, `/tiles/…` (the database as a 3D Tiles tileset with each
+//! cell's visibility: the files `hdov export --3dtiles` writes) and the viewer's files. Safe by default: loopback unless
 //! `--addr` says otherwise, GET only, nothing writes, parameters and URLs bounded, mesh references
 //! checked against the catalog (no part of a request reaches the filesystem), a concurrency limit
 //! and a per-request timeout. A client's mistake is a 400 or 404 with `{"error": …}` in the
@@ -55,6 +56,12 @@ struct Served {
     db: Database,
     /// Record offset → the stored level.
     lods: HashMap<u64, ServedLod>,
+    /// The database as a 3D Tiles tileset under `/tiles/`: the files `hdov export --3dtiles`
+    /// writes, byte for byte.
+    tiles: hdov::tiles::Tileset,
+    /// `tileset.json` and the visibility index, serialised once.
+    tileset_json: Vec<u8>,
+    index_json: Vec<u8>,
 }
 
 /// A stored level as the routes name it: written once at start, not per item of every answer.
@@ -76,7 +83,10 @@ pub fn serve(a: ServeCmd) -> hdov::Result<()> {
         let crc = db.lod_checksum(r)?;
         lods.insert(r.offset, ServedLod { lod: *r, crc, url: format!("/mesh/{}-{crc:08x}.glb", r.offset) });
     }
-    let served = Arc::new(Served { db, lods });
+    let tiles = hdov::tiles::tileset(&db, None)?;
+    let tileset_json = serde_json::to_vec(&tiles.json).expect("serialisable");
+    let index_json = serde_json::to_vec(&tiles.index).expect("serialisable");
+    let served = Arc::new(Served { db, lods, tiles, tileset_json, index_json });
     // Database work is CPU-bound and short: threads beyond the cores only add memory (a heap
     // arena each) and switches; requests past them wait in the concurrency limit's queue.
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -137,8 +147,9 @@ fn router(served: Arc<Served>, concurrency: usize, timeout: Duration) -> Router 
         .route("/recorded-walk", get(recorded_walk))
         .route("/walk", get(walk))
         .route("/mesh/{name}", get(mesh))
+        .route("/tiles/{*path}", get(tile_file))
         .fallback(|| async {
-            Reply::NotFound("no such route (/, /info, /query, /scene, /recorded-walk, /mesh/…)".into())
+            Reply::NotFound("no such route (/, /info, /query, /scene, /recorded-walk, /mesh/…, /tiles/…)".into())
         })
         .layer(middleware::from_fn(only_small_gets))
         .layer(RequestBodyLimitLayer::new(1024))
@@ -391,4 +402,36 @@ async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: H
     }
     let bytes = blocking(s, move |s| hdov::lod_glb(&s.db, &lod).map_err(reply)).await?;
     Ok((cache, [(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response())
+}
+
+/// `/tiles/PATH`: the file PATH of the 3D Tiles export (`tileset.json`, `content/…`,
+/// `visibility/index.json`, `visibility/cells/{id}.bin`), made from the database as the export
+/// makes it. Only names the tileset lists are served.
+async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Result<Response, Reply> {
+    let unknown =
+        || Reply::NotFound(format!("no tileset file {} (names come from /tiles/tileset.json)", quoted(&path)));
+    let json = |bytes: &[u8]| ([(header::CONTENT_TYPE, "application/json")], bytes.to_vec()).into_response();
+    if path == hdov::tiles::TILESET_FILE {
+        return Ok(json(&s.tileset_json));
+    }
+    if path == hdov::tiles::VISIBILITY_INDEX {
+        return Ok(json(&s.index_json));
+    }
+    if let Some(&lod) = s.tiles.contents.get(&path) {
+        let bytes = blocking(s, move |s| hdov::lod_glb(&s.db, &lod).map_err(reply)).await?;
+        return Ok(([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response());
+    }
+    let cells = s.db.grid().map_or(0, |g| g.cell_count());
+    let cell = path
+        .strip_prefix("visibility/cells/")
+        .and_then(|f| f.strip_suffix(".bin"))
+        .and_then(|c| c.parse::<u32>().ok())
+        .filter(|&c| (c as usize) < cells && path == hdov::tiles::cell_file(c))
+        .ok_or_else(unknown)?;
+    let bytes = blocking(s, move |s| {
+        let v = s.db.cell_visibility(cell, &hdov::QueryParams::default()).map_err(reply)?;
+        Ok(hdov::tiles::encode_cell(&v, s.db.node_count()))
+    })
+    .await?;
+    Ok(([(header::CONTENT_TYPE, "application/octet-stream")], bytes).into_response())
 }

@@ -11,11 +11,13 @@
 //! Every tree page and V-page is read through the database's page access (`db::access`),
 //! which counts what each query reads per file.
 
+mod cell;
 mod levels;
 mod select;
 pub mod session;
 mod traverse;
 
+pub use cell::CellVisibility;
 pub use levels::visibility_bias;
 
 use std::fmt;

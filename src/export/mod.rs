@@ -3,6 +3,8 @@
 //! mesh (instances stay instances); `extras` on each node say what it is (kind, id, name, DoV,
 //! LOD level, error).
 
+pub mod tiles;
+
 use std::collections::HashMap;
 use std::path::Path;
 
