@@ -119,6 +119,11 @@ impl CellSet {
         CellSet { runs }
     }
 
+    /// The set as sorted runs `[first, end)`.
+    pub fn runs(&self) -> &[[u32; 2]] {
+        &self.runs
+    }
+
     /// Whether `id` is in the set.
     pub fn contains(&self, id: usize) -> bool {
         let i = self.runs.partition_point(|r| (r[1] as usize) <= id);

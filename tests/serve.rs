@@ -366,13 +366,7 @@ const SKY: [u8; 3] = hdov::render::BACKGROUND;
 /// error on the page or in the console.
 #[test]
 fn the_viewer_draws_the_answer_in_a_real_browser() {
-    let chromium =
-        ["chromium", "chromium-browser"].into_iter().find(|c| Command::new(c).arg("--version").output().is_ok());
-    let Some(chromium) = chromium else {
-        assert!(std::env::var("HDOV_REQUIRE_BROWSER").as_deref() != Ok("1"), "chromium is required");
-        hdov_testkit::skip("no chromium");
-        return;
-    };
+    let Some(chromium) = hdov_testkit::browser::chromium_or_skip() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let db_dir = tiny_city(tmp.path());
     let db = Database::open(&db_dir).unwrap();
@@ -384,18 +378,7 @@ fn the_viewer_draws_the_answer_in_a_real_browser() {
     let page = |extra: &str| {
         format!("http://{}/?at={},{},{}&look={},{},{}{extra}", server.addr, c.x, c.y, c.z, look.x, look.y, look.z)
     };
-    let browse = |what: &str, url: &str| {
-        let out = Command::new(chromium)
-            .args(["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
-            .args(["--window-size=800,600", "--virtual-time-budget=20000", "--enable-logging=stderr", "--v=0"])
-            .args([what, url])
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "chromium {what}: {:?}", out.status);
-        let console = String::from_utf8_lossy(&out.stderr).into_owned();
-        assert!(!console.contains("Uncaught"), "{url}: an error in the console:\n{console}");
-        String::from_utf8_lossy(&out.stdout).into_owned()
-    };
+    let browse = |what: &str, url: &str| hdov_testkit::browser::browse(chromium, what, url, [800, 600], 20000);
     let dom = browse("--dump-dom", &page(""));
     assert!(dom.contains("data-state=\"ready\""), "the viewer never got ready:\n{dom}");
     assert!(dom.contains(&format!("items    {}", answer.items.len())), "overlay:\n{dom}");
@@ -443,4 +426,74 @@ fn the_viewer_draws_the_answer_in_a_real_browser() {
     let dom = browse("--dump-dom", &walk);
     assert!(dom.contains("data-walk=\"done\""), "the walk did not finish:\n{dom}");
     assert!(dom.contains("walk done, 30 steps") && dom.contains("<div id=\"error\"></div>"), "{dom}");
+}
+
+/// The 3D Tiles page in a real browser, 3DTilesRendererJS with and without hdov's visibility
+/// plugin, at three viewpoints of the tiny city, refining to one pixel of error (so that what is
+/// hidden but in the frustum is wanted): with the plugin it finds the cell the library locates,
+/// and every tile it requests is one the cell may see and not below a stop of the cell; without
+/// it, tiles the cell cannot see are requested.
+#[test]
+fn the_tiles_plugin_never_requests_what_the_cell_cannot_see() {
+    let Some(chromium) = hdov_testkit::browser::chromium_or_skip() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let db_dir = tiny_city(tmp.path());
+    let db = Database::open(&db_dir).unwrap();
+    let server = Server::start(&db_dir, &[]);
+    let set = get(server.addr, "/tiles/tileset.json").json();
+    let nodes = u64::from(db.node_count());
+    let grid = db.grid().unwrap();
+    let (mut fewer, mut hidden) = (0, 0);
+    for (k, cell) in [[1, 0, 1], [grid.dims[0] / 2, 0, grid.dims[2] / 2], [grid.dims[0] - 2, 0, grid.dims[2] - 1]]
+        .into_iter()
+        .enumerate()
+    {
+        let at = grid.cell_centres()[grid.cell_id(cell)];
+        let look = [glam::Vec3::X, glam::Vec3::new(-0.3, -0.05, 1.0), glam::Vec3::new(-1.0, 0.0, -1.0)][k];
+        let run = |plugin: u32| {
+            let url = format!(
+                "http://{}/tiles.html?frames=timer&errorTarget=1&plugin={plugin}&at={},{},{}&look={},{},{}",
+                server.addr, at.x, at.y, at.z, look.x, look.y, look.z
+            );
+            let dom = hdov_testkit::browser::browse(chromium, "--dump-dom", &url, [800, 600], 120_000);
+            hdov_testkit::browser::page_result(&dom).unwrap_or_else(|e| panic!("{url}: {e}"))
+        };
+        let with = run(1);
+        let (_, id) = db.locate(at).unwrap();
+        assert_eq!(with["steps"][0]["cell"], id, "the plugin's cell");
+        let file = hdov::tiles::decode_cell(&get(server.addr, &format!("/tiles/{}", hdov::tiles::cell_file(id))).body)
+            .unwrap();
+        let seen: HashMap<u64, u16> = file.entries.iter().copied().collect();
+        let stops: HashMap<u64, u32> = file.stops.iter().copied().collect();
+        // Content a tile of the cell may draw: seen, and under no stop of the cell.
+        let mut allowed = std::collections::HashSet::new();
+        let mut stack = vec![(&set["root"], false)];
+        while let Some((tile, under_stop)) = stack.pop() {
+            let h = &tile["extras"]["hdov"];
+            let key = h["node"].as_u64().unwrap_or_else(|| nodes + h["object"].as_u64().unwrap());
+            if !seen.contains_key(&key) || under_stop {
+                continue;
+            }
+            if let Some(uri) = tile["content"]["uri"].as_str() {
+                allowed.insert(format!("/tiles/{uri}"));
+            }
+            let stop = h["level"].as_u64().is_some_and(|l| stops.get(&key).is_some_and(|&s| l <= u64::from(s)));
+            for c in tile["children"].as_array().into_iter().flatten() {
+                stack.push((c, stop));
+            }
+        }
+        let requested: Vec<String> = serde_json::from_value(with["requested"].clone()).unwrap();
+        let content: Vec<&String> = requested.iter().filter(|u| u.contains("/content/")).collect();
+        assert!(!content.is_empty(), "cell {id}: nothing drawn");
+        for u in &content {
+            assert!(allowed.contains(*u), "cell {id}: {u} requested, which the cell cannot see or stops above");
+        }
+        // Without the plugin the renderer requests tiles the cell cannot see: the viewpoint tests
+        // something.
+        let without: Vec<String> = serde_json::from_value(run(0)["requested"].clone()).unwrap();
+        hidden += without.iter().filter(|u| u.contains("/content/") && !allowed.contains(*u)).count();
+        fewer += usize::from(without.len() > requested.len());
+    }
+    assert!(hidden > 0, "no viewpoint had a hidden tile in view");
+    assert!(fewer >= 2, "the plugin saves requests at {fewer} of 3 viewpoints");
 }

@@ -146,8 +146,11 @@ fn each_cell_file_says_what_the_query_answers_there() {
     let tmp = tempfile::tempdir().unwrap();
     let (_, db, out) = export(tmp.path());
     let index: Value = serde_json::from_slice(&std::fs::read(out.join(tiles::VISIBILITY_INDEX)).unwrap()).unwrap();
-    let grid: hdov::ViewGrid = serde_json::from_value(index["grid"].clone()).unwrap();
-    assert_eq!(&grid, db.grid().unwrap());
+    let grid = db.grid().unwrap().clone();
+    let g = &index["grid"];
+    assert_eq!(g["dims"], serde_json::json!(grid.dims));
+    let region: Vec<f32> = serde_json::from_value(g["region"].clone()).unwrap();
+    assert_eq!(region, grid.region.to_array());
     let scene_from_tileset =
         Mat4::from_cols_slice(&serde_json::from_value::<Vec<f32>>(index["sceneFromTileset"].clone()).unwrap());
     let nodes = u64::from(db.node_count());
@@ -212,4 +215,58 @@ fn cell_files_refuse_damage_and_the_export_never_overwrites() {
     let other = tmp.path().join("other");
     assert!(hdov::tiles::write_tileset(&db, &other, Some(Mat4::ZERO), &hdov::Progress::hidden()).is_err());
     assert!(!other.exists());
+}
+
+/// A second client reads the tileset: loaders.gl (`tools/tiles/loadersgl-check.mjs`, run by
+/// node) finds every tile's error at least its children's and every content vertex inside its
+/// tile's box as loaders.gl places it.
+#[test]
+fn loaders_gl_reads_the_tileset_and_finds_each_box_holds_its_content() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, _, out) = export(tmp.path());
+    let npm_root = std::process::Command::new("npm").args(["root", "-g"]).output().ok();
+    let node_path = npm_root.map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string()).unwrap_or_default();
+    if !Path::new(&node_path).join("@loaders.gl/tiles").exists() {
+        return hdov_testkit::testdata::skip_for_want_of(
+            "loaders.gl (node, npm @loaders.gl/core, 3d-tiles, tiles, gltf)",
+        );
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/tiles/loadersgl-check.mjs");
+    let run = std::process::Command::new("node").arg(&script).arg(&out).env("NODE_PATH", &node_path).output().unwrap();
+    let report = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{report}{}", String::from_utf8_lossy(&run.stderr));
+    let r: Value = serde_json::from_str(report.trim()).unwrap();
+    let set: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+    let mut all = Vec::new();
+    tiles(&set["root"], Mat4::IDENTITY, &mut all);
+    assert_eq!(r["tiles"].as_u64().unwrap() as usize, all.len(), "loaders.gl reads every tile");
+    assert!(r["vertices"].as_u64().unwrap() > 0);
+}
+
+/// A database built without visibility exports as a tileset alone: no visibility index for a
+/// client to follow, every object's full detail still there.
+#[test]
+fn a_database_without_visibility_is_a_tileset_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene =
+        hdov::city::generate(&hdov::city::CityParams { scale: hdov::city::CityScale::Tiny, ..Default::default() })
+            .unwrap();
+    let params = hdov::BuildParams { visibility: None, ..Default::default() };
+    let dir = tmp.path().join("db");
+    hdov::build(&scene, &dir, &params, hdov::Overwrite::Never, &hdov::Progress::hidden()).unwrap();
+    let db = Database::open(&dir).unwrap();
+    let out = tmp.path().join("tiles");
+    let report = hdov::tiles::write_tileset(&db, &out, None, &hdov::Progress::hidden()).unwrap();
+    assert_eq!((report.cells, report.visibility_bytes), (0, 0));
+    assert!(!out.join("visibility").exists());
+    let set: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+    assert!(set["extras"]["hdov"]["visibility"].is_null());
+    let mut all = Vec::new();
+    tiles(&set["root"], Mat4::IDENTITY, &mut all);
+    let full: HashSet<u64> = all
+        .iter()
+        .filter(|(t, _)| t["extras"]["hdov"]["level"] == 0)
+        .filter_map(|(t, _)| t["extras"]["hdov"]["object"].as_u64())
+        .collect();
+    assert_eq!(full.len(), scene.objects.len());
 }

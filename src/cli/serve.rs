@@ -61,7 +61,7 @@ struct Served {
     tiles: hdov::tiles::Tileset,
     /// `tileset.json` and the visibility index, serialised once.
     tileset_json: Vec<u8>,
-    index_json: Vec<u8>,
+    index_json: Option<Vec<u8>>,
 }
 
 /// A stored level as the routes name it: written once at start, not per item of every answer.
@@ -85,7 +85,7 @@ pub fn serve(a: ServeCmd) -> hdov::Result<()> {
     }
     let tiles = hdov::tiles::tileset(&db, None)?;
     let tileset_json = serde_json::to_vec(&tiles.json).expect("serialisable");
-    let index_json = serde_json::to_vec(&tiles.index).expect("serialisable");
+    let index_json = tiles.index.as_ref().map(|i| serde_json::to_vec(i).expect("serialisable"));
     let served = Arc::new(Served { db, lods, tiles, tileset_json, index_json });
     // Database work is CPU-bound and short: threads beyond the cores only add memory (a heap
     // arena each) and switches; requests past them wait in the concurrency limit's queue.
@@ -140,6 +140,18 @@ fn router(served: Arc<Served>, concurrency: usize, timeout: Duration) -> Router 
         .route(
             "/three-LICENSE.txt",
             get(|| asset("text/plain; charset=utf-8", include_bytes!("viewer/three-LICENSE.txt"))),
+        )
+        .route("/stage.js", get(|| asset("text/javascript", include_bytes!("viewer/stage.js"))))
+        .route("/tiles.html", get(|| asset("text/html; charset=utf-8", include_bytes!("viewer/tiles.html"))))
+        .route("/tiles.js", get(|| asset("text/javascript", include_bytes!("viewer/tiles.js"))))
+        .route("/hdov-tiles-plugin.js", get(|| asset("text/javascript", include_bytes!("viewer/hdov-tiles-plugin.js"))))
+        .route(
+            "/3d-tiles-renderer.min.js",
+            get(|| asset("text/javascript", include_bytes!("viewer/3d-tiles-renderer.min.js"))),
+        )
+        .route(
+            "/3d-tiles-renderer-LICENSE.txt",
+            get(|| asset("text/plain; charset=utf-8", include_bytes!("viewer/3d-tiles-renderer-LICENSE.txt"))),
         )
         .route("/info", get(info))
         .route("/query", get(query))
@@ -414,14 +426,14 @@ async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Re
     if path == hdov::tiles::TILESET_FILE {
         return Ok(json(&s.tileset_json));
     }
-    if path == hdov::tiles::VISIBILITY_INDEX {
-        return Ok(json(&s.index_json));
+    if let Some(index) = s.index_json.as_ref().filter(|_| path == hdov::tiles::VISIBILITY_INDEX) {
+        return Ok(json(index));
     }
     if let Some(&lod) = s.tiles.contents.get(&path) {
         let bytes = blocking(s, move |s| hdov::lod_glb(&s.db, &lod).map_err(reply)).await?;
         return Ok(([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response());
     }
-    let cells = s.db.grid().map_or(0, |g| g.cell_count());
+    let cells = if s.index_json.is_some() { s.db.grid().map_or(0, |g| g.cell_count()) } else { 0 };
     let cell = path
         .strip_prefix("visibility/cells/")
         .and_then(|f| f.strip_suffix(".bin"))

@@ -86,11 +86,19 @@ pub fn lod_glb(db: &Database, lod: &LodRef) -> Result<Vec<u8>> {
         "scenes": [{ "nodes": [0] }],
         "nodes": [{ "mesh": 0 }],
         "meshes": [mesh],
+        "materials": [plain_material()],
         "accessors": accessors,
         "bufferViews": views,
         "buffers": [{ "byteLength": bin.len() }],
     });
     Ok(glb(&doc, &bin))
+}
+
+/// A light grey, rough, non-metallic surface: glTF's default material is fully metallic, which
+/// clients without an environment map draw black (3D Tiles clients among them).
+fn plain_material() -> Value {
+    json!({ "name": "hdov", "pbrMetallicRoughness": { "baseColorFactor": [0.85, 0.83, 0.8, 1.0],
+        "metallicFactor": 0.0, "roughnessFactor": 1.0 } })
 }
 
 fn asset() -> Value {
@@ -116,7 +124,7 @@ fn push_mesh(
     accessors.push(json!({ "bufferView": positions, "componentType": 5126, "count": m.positions.len(),
         "type": "VEC3", "min": lo.to_array(), "max": hi.to_array() }));
     accessors.push(json!({ "bufferView": indices, "componentType": 5125, "count": m.indices.len(), "type": "SCALAR" }));
-    Ok(json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 }, "indices": accessors.len() - 1 }] }))
+    Ok(json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 }, "indices": accessors.len() - 1, "material": 0 }] }))
 }
 
 /// The `.glb` of `parts`: items drawing the same stored record share one glTF mesh.
@@ -160,10 +168,13 @@ fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
         "scene": 0,
         "scenes": [{ "nodes": node_ids }],
         "nodes": nodes,
-        "meshes": meshes,
         "accessors": accessors,
         "bufferViews": views,
     });
+    if !meshes.is_empty() {
+        doc["meshes"] = json!(meshes);
+        doc["materials"] = json!([plain_material()]);
+    }
     if !bin.is_empty() {
         doc["buffers"] = json!([{ "byteLength": bin.len() }]);
     }

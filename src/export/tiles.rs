@@ -29,6 +29,7 @@ use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
 use crate::format::tree_page::NodePage;
 use crate::geom::{Aabb, max_scale};
+use crate::grid::ViewGrid;
 use crate::progress::Report;
 use crate::query::{CellVisibility, QueryParams};
 use crate::progress::Progress;
@@ -55,8 +56,8 @@ pub struct Tileset {
     pub json: Value,
     /// Each content file's path in the export and the stored level it holds.
     pub contents: BTreeMap<String, LodRef>,
-    /// `visibility/index.json`.
-    pub index: Value,
+    /// `visibility/index.json`; `None` for a database without visibility.
+    pub index: Option<Value>,
     /// Tiles in the tileset.
     pub tiles: usize,
 }
@@ -97,26 +98,44 @@ pub fn tileset(db: &Database, root_transform: Option<Mat4>) -> Result<Tileset> {
     if root != Mat4::IDENTITY {
         root_tile["transform"] = json!(root.to_cols_array());
     }
-    let json = json!({
+    let mut json = json!({
         "asset": { "version": "1.1", "generator": concat!("hdov ", env!("CARGO_PKG_VERSION")) },
         "geometricError": top_error,
         "root": root_tile,
-        "extras": { "hdov": { "visibility": VISIBILITY_INDEX, "nodes": db.node_count(),
-            "objects": db.catalog().objects.len() } },
+        "extras": { "hdov": { "nodes": db.node_count(), "objects": db.catalog().objects.len() } },
     });
+    // A database built without visibility is a tileset alone.
+    let Some(grid) = db.grid().filter(|_| !db.layouts().is_empty()) else {
+        return Ok(Tileset { json, contents: w.contents, index: None, tiles: w.tiles });
+    };
+    json["extras"]["hdov"]["visibility"] = json!(VISIBILITY_INDEX);
     let scene_from_tileset = (root * Y_UP_TO_Z_UP).inverse();
     let index = json!({
         "format": "hdov-cell-visibility",
         "version": CELL_FILE_VERSION,
         "cells": CELL_FILES,
-        "cellCount": db.grid().map_or(0, |g| g.cell_count()),
+        "cellCount": grid.cell_count(),
         "nodeCount": db.node_count(),
         "objectCount": db.catalog().objects.len(),
         "eta": QueryParams::default().eta,
         "sceneFromTileset": scene_from_tileset.to_cols_array(),
-        "grid": db.grid(),
+        "grid": client_grid(grid),
     });
-    Ok(Tileset { json, contents: w.contents, index, tiles: w.tiles })
+    Ok(Tileset { json, contents: w.contents, index: Some(index), tiles: w.tiles })
+}
+
+/// The grid as a client finds cells in it (docs/format.md, "3D Tiles out"): the region as six
+/// numbers, and every 64-bit place mask as 16 hex digits, which JSON numbers (doubles in
+/// JavaScript) cannot hold exactly.
+fn client_grid(g: &ViewGrid) -> Value {
+    let hex = |m: u64| format!("{m:016x}");
+    json!({
+        "region": g.region.to_array(),
+        "dims": g.dims,
+        "present": g.present.as_ref().map(|s| s.runs()),
+        "places": g.places.as_ref().map(|p| p.iter().map(|&m| hex(m)).collect::<Vec<_>>()),
+        "parts": g.parts.iter().map(|p| json!([p.cell, hex(p.places)])).collect::<Vec<_>>(),
+    })
 }
 
 /// Builds the tiles depth first, naming each stored level's content once.
@@ -389,12 +408,14 @@ pub fn decode_cell(bytes: &[u8]) -> std::result::Result<CellFile, String> {
 
 /// Writes `db` as a 3D Tiles tileset into the new directory `dir` (refused if anything is
 /// there; written aside and renamed into place, so a failed export leaves nothing): the
-/// tileset, each stored level's content once, and every view cell's visibility.
+/// tileset, each stored level's content once, and every view cell's visibility (none for a
+/// database built without it).
 pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, progress: &Progress) -> Result<TilesReport> {
     let set = tileset(db, root_transform)?;
     let txn = hdov_storage::DirTxn::begin(dir, hdov_storage::Overwrite::Never)?;
     let at = |p: &str| -> PathBuf { txn.path().join(p) };
-    for sub in ["content", "visibility/cells"] {
+    let subs: &[&str] = if set.index.is_some() { &["content", "visibility/cells"] } else { &["content"] };
+    for sub in subs {
         std::fs::create_dir_all(at(sub)).map_err(|e| Error::io(at(sub), e))?;
     }
     let write = |path: PathBuf, bytes: &[u8]| std::fs::write(&path, bytes).map_err(|e| Error::io(path, e));
@@ -412,9 +433,13 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
         })
         .sum::<Result<u64>>()?;
     bar.finish_and_clear();
-    let index_bytes = serde_json::to_vec(&set.index).expect("serialisable");
-    write(at(VISIBILITY_INDEX), &index_bytes)?;
-    let cells = db.grid().map_or(0, |g| g.cell_count()) as u32;
+    let index_bytes = set.index.as_ref().map_or(Vec::new(), |i| serde_json::to_vec(i).expect("serialisable"));
+    let cells = if set.index.is_some() {
+        write(at(VISIBILITY_INDEX), &index_bytes)?;
+        db.grid().map_or(0, |g| g.cell_count()) as u32
+    } else {
+        0
+    };
     let bar = progress.bar("visibility", u64::from(cells));
     let params = QueryParams::default();
     let cell_bytes = (0..cells)

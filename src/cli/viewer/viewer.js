@@ -11,6 +11,7 @@
 // picture), eta, mode, lod_rule (passed to /query).
 
 import * as THREE from 'three';
+import { stage } from '/stage.js';
 
 const params = new URLSearchParams(location.search);
 const overlay = document.getElementById('overlay');
@@ -48,19 +49,7 @@ function cellOf(p) {
 }
 
 // --- the scene ----------------------------------------------------------------------------
-const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-renderer.setPixelRatio(window.devicePixelRatio);
-renderer.setSize(innerWidth, innerHeight);
-document.body.appendChild(renderer.domElement);
-const scene = new THREE.Scene();
-// The renderer's background and near plane (`hdov render`), so that pictures compare pixel by pixel.
-scene.background = new THREE.Color(0xd6e4f0);
-scene.add(new THREE.HemisphereLight(0xffffff, 0x556655, 1.6));
-const sun = new THREE.DirectionalLight(0xffffff, 1.4);
-sun.position.set(0.4, 1, 0.25);
-scene.add(sun);
-const far = Math.hypot(x1 - x0, z1 - z0) * 1.5;
-const camera = new THREE.PerspectiveCamera(60, innerWidth / innerHeight, 0.05, far);
+const { renderer, scene, camera } = stage({ far: Math.hypot(x1 - x0, z1 - z0) * 1.5 });
 addEventListener('resize', () => {
   camera.aspect = innerWidth / innerHeight;
   camera.updateProjectionMatrix();

@@ -7,10 +7,12 @@
 //! - [`audit`]: the DoV audits (backend agreement, the dense from-region reference, floor tests);
 //! - [`bench`]: the query benchmarks' database fixture and viewpoints;
 //! - [`view_error`]: from-region error as a user sees it (wrong share of a view, per frame);
-//! - [`testdata`]: assimp's test models and the glTF-Validator, skipped or required.
+//! - [`testdata`]: assimp's test models and the glTF-Validator, skipped or required;
+//! - [`browser`]: pages of `hdov serve` in headless chromium.
 
 pub mod audit;
 pub mod bench;
+pub mod browser;
 pub mod gpu;
 pub mod scenes;
 pub mod testdata;
