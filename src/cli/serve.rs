@@ -14,7 +14,7 @@
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use axum::Router;
@@ -57,11 +57,28 @@ struct Served {
     /// Record offset → the stored level.
     lods: HashMap<u64, ServedLod>,
     /// The database as a 3D Tiles tileset under `/tiles/`: the files `hdov export --3dtiles`
-    /// writes, byte for byte.
-    tiles: hdov::tiles::Tileset,
+    /// writes, byte for byte. Made on the first request for it (it reads every node page and
+    /// decodes every base mesh), not at start.
+    tiles: OnceLock<Result<ServedTiles, String>>,
+}
+
+/// The tileset as `/tiles/` serves it.
+struct ServedTiles {
+    set: hdov::tiles::Tileset,
     /// `tileset.json` and the visibility index, serialised once.
     tileset_json: Vec<u8>,
     index_json: Option<Vec<u8>>,
+}
+
+impl Served {
+    /// The tileset, made on first use; a database that fails to give one is a 500.
+    fn tiles(&self) -> Result<&ServedTiles, Reply> {
+        let made = self.tiles.get_or_init(|| {
+            let set = hdov::tiles::tileset(&self.db, None).map_err(|e| e.to_string())?;
+            Ok(ServedTiles { tileset_json: set.tileset_bytes(), index_json: set.index_bytes(), set })
+        });
+        made.as_ref().map_err(|e| Reply::Status(StatusCode::INTERNAL_SERVER_ERROR, e.clone()))
+    }
 }
 
 /// A stored level as the routes name it: written once at start, not per item of every answer.
@@ -83,10 +100,7 @@ pub fn serve(a: ServeCmd) -> hdov::Result<()> {
         let crc = db.lod_checksum(r)?;
         lods.insert(r.offset, ServedLod { lod: *r, crc, url: format!("/mesh/{}-{crc:08x}.glb", r.offset) });
     }
-    let tiles = hdov::tiles::tileset(&db, None)?;
-    let tileset_json = serde_json::to_vec(&tiles.json).expect("serialisable");
-    let index_json = tiles.index.as_ref().map(|i| serde_json::to_vec(i).expect("serialisable"));
-    let served = Arc::new(Served { db, lods, tiles, tileset_json, index_json });
+    let served = Arc::new(Served { db, lods, tiles: OnceLock::new() });
     // Database work is CPU-bound and short: threads beyond the cores only add memory (a heap
     // arena each) and switches; requests past them wait in the concurrency limit's queue.
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -420,30 +434,28 @@ async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: H
 /// `visibility/index.json`, `visibility/cells/{id}.bin`), made from the database as the export
 /// makes it. Only names the tileset lists are served.
 async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Result<Response, Reply> {
-    let unknown =
-        || Reply::NotFound(format!("no tileset file {} (names come from /tiles/tileset.json)", quoted(&path)));
-    let json = |bytes: &[u8]| ([(header::CONTENT_TYPE, "application/json")], bytes.to_vec()).into_response();
-    if path == hdov::tiles::TILESET_FILE {
-        return Ok(json(&s.tileset_json));
-    }
-    if let Some(index) = s.index_json.as_ref().filter(|_| path == hdov::tiles::VISIBILITY_INDEX) {
-        return Ok(json(index));
-    }
-    if let Some(&lod) = s.tiles.contents.get(&path) {
-        let bytes = blocking(s, move |s| hdov::lod_glb(&s.db, &lod).map_err(reply)).await?;
-        return Ok(([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response());
-    }
-    let cells = if s.index_json.is_some() { s.db.grid().map_or(0, |g| g.cell_count()) } else { 0 };
-    let cell = path
-        .strip_prefix("visibility/cells/")
-        .and_then(|f| f.strip_suffix(".bin"))
-        .and_then(|c| c.parse::<u32>().ok())
-        .filter(|&c| (c as usize) < cells && path == hdov::tiles::cell_file(c))
-        .ok_or_else(unknown)?;
-    let bytes = blocking(s, move |s| {
-        let v = s.db.cell_visibility(cell, &hdov::QueryParams::default()).map_err(reply)?;
-        Ok(hdov::tiles::encode_cell(&v, s.db.node_count()))
+    blocking(s, move |s| {
+        let t = s.tiles()?;
+        let file = |kind: &'static str, bytes: Vec<u8>| ([(header::CONTENT_TYPE, kind)], bytes).into_response();
+        if path == hdov::tiles::TILESET_FILE {
+            return Ok(file("application/json", t.tileset_json.clone()));
+        }
+        if let Some(index) = t.index_json.as_ref().filter(|_| path == hdov::tiles::VISIBILITY_INDEX) {
+            return Ok(file("application/json", index.clone()));
+        }
+        if let Some(lod) = t.set.contents.get(&path) {
+            return Ok(file("model/gltf-binary", hdov::lod_glb(&s.db, lod).map_err(reply)?));
+        }
+        let cells = if t.index_json.is_some() { s.db.grid().map_or(0, |g| g.cell_count()) } else { 0 };
+        let cell = path
+            .strip_prefix("visibility/cells/")
+            .and_then(|f| f.strip_suffix(".bin"))
+            .and_then(|c| c.parse::<u32>().ok())
+            .filter(|&c| (c as usize) < cells && path == hdov::tiles::cell_file(c))
+            .ok_or_else(|| {
+                Reply::NotFound(format!("no tileset file {} (names come from /tiles/tileset.json)", quoted(&path)))
+            })?;
+        Ok(file("application/octet-stream", hdov::tiles::cell_file_bytes(&s.db, cell).map_err(reply)?))
     })
-    .await?;
-    Ok(([(header::CONTENT_TYPE, "application/octet-stream")], bytes).into_response())
+    .await
 }

@@ -93,12 +93,24 @@ impl<'db> Access<'db> {
         self.db.read_node(id, priority, &mut self.pages)
     }
 
-    /// The V-page of `node` in the selected cell into `out`; false if the node is hidden there.
-    pub fn vpage(&mut self, node: u32, priority: f64, out: &mut Vec<VEntry>) -> Result<bool> {
+    /// Enters node `id` in the selected cell: its page, with its V-page read into `v` (one
+    /// entry per entry of the node, checked); `None` when the node is hidden there. `priority`
+    /// is its DoV (for the cache's policy).
+    pub fn enter(&mut self, id: u32, priority: f64, v: &mut Vec<VEntry>) -> Result<Option<NodePage>> {
         let pages = &mut self.pages;
         let cursor =
             self.cursor.as_mut().ok_or_else(|| Error::bad_param(Param::Layout, "a spatial reader reads no V-pages"))?;
-        Ok(cursor.vpage_into(node, priority, pages, out)?)
+        if !cursor.vpage_into(id, priority, pages, v)? {
+            return Ok(None);
+        }
+        let page = self.node(id, priority)?;
+        if page.node.entries.len() != v.len() {
+            return Err(Error::bad_file(
+                self.db.dir(),
+                format!("node {id} has {} entries, its V-page {}", page.node.entries.len(), v.len()),
+            ));
+        }
+        Ok(Some(page))
     }
 
     pub fn io(&self) -> PageIo {

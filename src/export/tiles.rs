@@ -138,6 +138,18 @@ fn client_grid(g: &ViewGrid) -> Value {
     })
 }
 
+impl Tileset {
+    /// `tileset.json`'s bytes.
+    pub fn tileset_bytes(&self) -> Vec<u8> {
+        serde_json::to_vec(&self.json).expect("serialisable")
+    }
+
+    /// `visibility/index.json`'s bytes; `None` without visibility.
+    pub fn index_bytes(&self) -> Option<Vec<u8>> {
+        self.index.as_ref().map(|i| serde_json::to_vec(i).expect("serialisable"))
+    }
+}
+
 /// Builds the tiles depth first, naming each stored level's content once.
 struct TileWriter<'a> {
     db: &'a Database,
@@ -166,16 +178,12 @@ impl TileWriter<'_> {
             .map(|e| if page.node.is_leaf() { self.object_tile(e.child, finest) } else { self.node_tile(e.child, e.mbr, finest) })
             .collect::<Result<Vec<Value>>>()?;
         let bounds = box_json(&z_up(&mbr));
-        let Some((&first, coarser)) = kept.split_first() else {
+        if kept.is_empty() {
             // No level fits under the tile above: an empty tile that a client refines through.
             return Ok(self.tile(bounds, above, None, json!({ "node": n }), children));
-        };
-        let mut tile = self.tile(bounds.clone(), finest, Some((format!("n{n}-{first}"), chain[first])), json!({ "node": n, "level": first }), children);
-        for &l in coarser {
-            let content = Some((format!("n{n}-{l}"), chain[l]));
-            tile = self.tile(bounds.clone(), errors[l], content, json!({ "node": n, "level": l }), vec![tile]);
         }
-        Ok(tile)
+        let content = |l: usize| (format!("n{n}-{l}"), chain[l]);
+        Ok(self.chain(&bounds, &kept, &errors, content, |l| json!({ "node": n, "level": l }), children))
     }
 
     /// Object `o` below a tile of error `above`: its levels of less error (full detail always),
@@ -188,16 +196,29 @@ impl TileWriter<'_> {
         let bounds = box_json(&z_up(&self.mesh_box(mesh, &chain)?));
         let errors = chain_errors(&chain, scale);
         let kept: Vec<usize> = distinct_levels(&errors).into_iter().filter(|&l| l == 0 || errors[l] < above).collect();
-        let mut tile = Value::Null;
-        for &l in &kept {
-            let children = if l == 0 { Vec::new() } else { vec![tile] };
-            let content = Some((format!("m{mesh}-{l}"), chain[l]));
-            tile = self.tile(bounds.clone(), errors[l], content, json!({ "object": o, "level": l }), children);
-        }
+        let content = |l: usize| (format!("m{mesh}-{l}"), chain[l]);
+        let mut tile = self.chain(&bounds, &kept, &errors, content, |l| json!({ "object": o, "level": l }), Vec::new());
         if model != Mat4::IDENTITY {
             tile["transform"] = json!((Y_UP_TO_Z_UP * model * Y_UP_TO_Z_UP.inverse()).to_cols_array());
         }
         Ok(tile)
+    }
+
+    /// The tiles of a chain's `levels` (finest first, each drawing `content(level)` with tile
+    /// error `errors[level]`), the coarsest outermost and the finest holding `children`.
+    fn chain(
+        &mut self,
+        bounds: &Value,
+        levels: &[usize],
+        errors: &[f32],
+        content: impl Fn(usize) -> (String, LodRef),
+        key: impl Fn(usize) -> Value,
+        mut children: Vec<Value>,
+    ) -> Value {
+        for &l in levels {
+            children = vec![self.tile(bounds.clone(), errors[l], Some(content(l)), key(l), children)];
+        }
+        children.pop().expect("a chain has a level")
     }
 
     /// One tile; `content` names its stored level (written once however many tiles share it).
@@ -324,6 +345,12 @@ pub fn encode_cell(v: &CellVisibility, nodes: u32) -> Vec<u8> {
     out
 }
 
+/// View cell `cell`'s visibility file: its [`CellVisibility`] under the default query,
+/// encoded ([`encode_cell`]).
+pub fn cell_file_bytes(db: &Database, cell: u32) -> Result<Vec<u8>> {
+    Ok(encode_cell(&db.cell_visibility(cell, &QueryParams::default())?, db.node_count()))
+}
+
 /// Node pairs and object pairs as one list by key (an object's key is `nodes` plus its id).
 fn keyed<T: Copy>(of_nodes: &[(u32, T)], of_objects: &[(u32, T)], nodes: u32) -> Vec<(u64, T)> {
     let node_keys = of_nodes.iter().map(|&(n, x)| (u64::from(n), x));
@@ -419,7 +446,7 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
         std::fs::create_dir_all(at(sub)).map_err(|e| Error::io(at(sub), e))?;
     }
     let write = |path: PathBuf, bytes: &[u8]| std::fs::write(&path, bytes).map_err(|e| Error::io(path, e));
-    let tileset_bytes = serde_json::to_vec(&set.json).expect("serialisable");
+    let tileset_bytes = set.tileset_bytes();
     write(at(TILESET_FILE), &tileset_bytes)?;
     let bar = progress.bar("content", set.contents.len() as u64);
     let content_bytes = set
@@ -433,7 +460,7 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
         })
         .sum::<Result<u64>>()?;
     bar.finish_and_clear();
-    let index_bytes = set.index.as_ref().map_or(Vec::new(), |i| serde_json::to_vec(i).expect("serialisable"));
+    let index_bytes = set.index_bytes().unwrap_or_default();
     let cells = if set.index.is_some() {
         write(at(VISIBILITY_INDEX), &index_bytes)?;
         db.grid().map_or(0, |g| g.cell_count()) as u32
@@ -441,11 +468,10 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
         0
     };
     let bar = progress.bar("visibility", u64::from(cells));
-    let params = QueryParams::default();
     let cell_bytes = (0..cells)
         .into_par_iter()
         .map(|c| {
-            let bytes = encode_cell(&db.cell_visibility(c, &params)?, db.node_count());
+            let bytes = cell_file_bytes(db, c)?;
             write(at(&cell_file(c)), &bytes)?;
             bar.advance(1);
             Ok(bytes.len() as u64)

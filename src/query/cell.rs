@@ -53,17 +53,8 @@ impl Database {
         let mut stack = vec![(0u32, 1.0f32)];
         let mut v: Vec<VEntry> = Vec::new();
         while let Some((id, dov)) = stack.pop() {
-            if !access.vpage(id, f64::from(dov), &mut v)? {
-                continue;
-            }
+            let Some(page) = access.enter(id, f64::from(dov), &mut v)? else { continue };
             out.nodes.push((id, dov));
-            let page = access.node(id, f64::from(dov))?;
-            if page.node.entries.len() != v.len() {
-                return Err(Error::bad_file(
-                    self.dir(),
-                    format!("node {id} has {} entries, its V-page {}", page.node.entries.len(), v.len()),
-                ));
-            }
             for (e, ve) in page.node.entries.iter().zip(&v) {
                 if ve.is_zero() {
                     continue;

@@ -67,18 +67,11 @@ impl Traversal<'_, '_> {
     /// Reads node `id`'s page and its V-page in the cell; `None` when the node is hidden there.
     fn enter(&mut self, id: u32, dov: f64) -> Result<Option<(NodePage, Vec<VEntry>)>> {
         let mut v = std::mem::take(&mut self.vpage);
-        if !self.access.vpage(id, dov, &mut v)? {
+        let Some(page) = self.access.enter(id, dov, &mut v)? else {
             self.vpage = v;
             return Ok(None);
-        }
+        };
         self.nodes_visited += 1;
-        let page = self.access.node(id, dov)?;
-        if page.node.entries.len() != v.len() {
-            return Err(crate::Error::bad_file(
-                self.levels.db.dir(),
-                format!("node {id} has {} entries, its V-page {}", page.node.entries.len(), v.len()),
-            ));
-        }
         Ok(Some((page, v)))
     }
 

@@ -101,8 +101,6 @@ export class HdovVisibilityPlugin {
     this.visibility = null;
     this.files = new Map();
     this.pending = new Map();
-    this.bytes = 0;
-    this.requests = 0;
   }
 
   init(tiles) {
@@ -135,8 +133,6 @@ export class HdovVisibilityPlugin {
     const r = await this.fetch(this.indexUrl);
     if (!r.ok) throw new Error(`${this.indexUrl}: ${r.status}`);
     const text = await r.text();
-    this.requests++;
-    this.bytes += text.length;
     this.index = JSON.parse(text);
     this.nodeCount = this.index.nodeCount;
     this.sceneFromTileset = this.index.sceneFromTileset;
@@ -180,8 +176,6 @@ export class HdovVisibilityPlugin {
     const r = await this.fetch(url);
     if (!r.ok) throw new Error(`${url}: ${r.status}`);
     const buffer = await r.arrayBuffer();
-    this.requests++;
-    this.bytes += buffer.byteLength;
     const file = decodeCell(buffer);
     this.files.set(cell, file);
     this.pending.delete(cell);

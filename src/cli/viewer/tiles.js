@@ -45,22 +45,23 @@ const { renderer, scene, camera } = stage({ antialias: false, pixelRatio: 1 });
 // Content without normals: flat shading, one material for every tile of both renderers.
 const material = new THREE.MeshLambertMaterial({ color: 0xd8d4cc, flatShading: true });
 
+/** `fetch`, adding each answer's request and bytes to `counts` (and its path to `counts.urls`,
+ * where kept). */
+function countingFetch(counts) {
+  return (url, options) => fetch(url, options).then(async (r) => {
+    const body = await r.arrayBuffer();
+    counts.requests++;
+    counts.bytes += body.byteLength;
+    counts.urls?.push(new URL(url, location.href).pathname);
+    return new Response(body, { status: r.status, statusText: r.statusText, headers: r.headers });
+  });
+}
+
 /** Tiles of /tiles/tileset.json; `counts` tallies what its fetches bring. */
 function tilesRenderer(counts, errorTarget) {
   const tiles = new TilesRenderer('/tiles/tileset.json');
   if (errorTarget != null) tiles.errorTarget = errorTarget;
-  tiles.registerPlugin({
-    name: 'COUNT_FETCHES',
-    fetchData(url, options) {
-      return fetch(url, options).then(async (r) => {
-        const body = await r.arrayBuffer();
-        counts.requests++;
-        counts.bytes += body.byteLength;
-        counts.urls.push(new URL(url, location.href).pathname);
-        return new Response(body, { status: r.status, statusText: r.statusText, headers: r.headers });
-      });
-    },
-  });
+  tiles.registerPlugin({ name: 'COUNT_FETCHES', fetchData: countingFetch(counts) });
   tiles.addEventListener('load-model', ({ scene: model }) => {
     model.traverse((o) => { if (o.isMesh) o.material = material; });
   });
@@ -81,12 +82,7 @@ let plugin = null;
 if (withPlugin) {
   plugin = new HdovVisibilityPlugin({
     queryNodes: params.get('nodes') === 'query',
-    fetch: (url) => fetch(url).then(async (r) => {
-      const body = await r.arrayBuffer();
-      visibilityCounts.requests++;
-      visibilityCounts.bytes += body.byteLength;
-      return new Response(body, { status: r.status, statusText: r.statusText, headers: r.headers });
-    }),
+    fetch: countingFetch(visibilityCounts),
   });
   tiles.registerPlugin(plugin);
 }
@@ -113,7 +109,6 @@ async function settle(t, limit = 3000) {
     const busy = t.isLoading || s.queued + s.downloading + s.parsing > 0 || t.rootTileset == null ||
       (t === tiles && plugin && (plugin.index == null || plugin.pending.size > 0));
     quiet = busy ? 0 : quiet + 1;
-    if (n % 50 === 0) overlay.textContent = `settling ${n}: ${JSON.stringify({ l: t.isLoading, q: s.queued, d: s.downloading, p: s.parsing, root: t.rootTileset != null, idx: plugin?.index != null, pend: plugin?.pending.size, cell: plugin?.cell, req: counts.requests })}`;
   }
   camera.updateMatrixWorld();
   t.update();
