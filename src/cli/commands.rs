@@ -112,9 +112,10 @@ pub struct VisibilityArgs {
     /// in a cell; docs/dov.md), `corners` (the 8 shared corners alone: the cheap option, a third
     /// to a half of region's visibility time), a number K of stratified interior points in
     /// addition to the corners, `adaptive[:SEEDS:BUDGET]`: points where new objects appear, at
-    /// most BUDGET per cell, or `probe[:POINTS:RAYS[:REGION]]`: rays from POINTS points of each
-    /// cell towards the objects its neighbourhood sees, RAYS per point and object, and REGION
-    /// rays from all over the cell in every direction.
+    /// most BUDGET per cell, or `probe[:POINTS:RAYS[:REGION[:NEAREST]]]`: rays from POINTS
+    /// points of each cell towards the objects its neighbourhood sees, RAYS per point and object
+    /// (from the NEAREST points to where it was seen: fewer is faster, e.g. probe:32:4:24576:8,
+    /// and may miss more), and REGION rays from all over the cell in every direction.
     #[arg(long, default_value = "region")]
     samples: Sampling,
     /// DoV backend: auto (a wgpu adapter if any, else cpu), gpu or cpu.

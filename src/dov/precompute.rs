@@ -226,7 +226,9 @@ pub fn precompute_shard(
         }
         let own = grid.view_corners(id);
         let own_dov: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).collect();
-        let nearby: Vec<&PointDov> = needed.iter().filter(|c| !own.contains(c)).map(|c| &corner_dov[c]).collect();
+        let nearby_ids: Vec<usize> = needed.iter().copied().filter(|c| !own.contains(c)).collect();
+        let nearby: Vec<&PointDov> = nearby_ids.iter().map(|c| &corner_dov[c]).collect();
+        let nearby_at: Vec<Vec3> = nearby_ids.iter().map(|&c| grid.corner_position(grid.corner_coords(c))).collect();
         let site = CellSite {
             id,
             coords,
@@ -235,6 +237,7 @@ pub fn precompute_shard(
             grid,
             corners: &own_dov,
             nearby: &nearby,
+            nearby_at: &nearby_at,
             object_bounds,
             cube: &cube,
         };

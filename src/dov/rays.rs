@@ -25,6 +25,14 @@ pub trait RayCaster: Sync {
         rays.iter().map(|&(o, d)| self.first_hit(o, d, reach)).collect()
     }
 
+    /// [`RayCaster::first_hit`] of each ray from `origin` (direction, reach in lengths of it):
+    /// rays that share an origin, such as a probe point's rays at many targets or a footprint's
+    /// texels, which a caster may sort by direction and trace together; the ids are the same,
+    /// in the order of `rays`.
+    fn first_hits_from(&self, origin: Vec3, rays: &[(Vec3, f32)]) -> Vec<u32> {
+        rays.iter().map(|&(d, reach)| self.first_hit(origin, d, reach)).collect()
+    }
+
     /// Points on every object's surface to aim at.
     fn targets(&self) -> &SurfaceTargets;
 }

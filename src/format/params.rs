@@ -514,8 +514,10 @@ mod tests {
         assert!(v.get("interior_samples").is_none() && v.get("adaptive").is_none());
         assert_eq!(serde_json::from_value::<BuildParams>(json).unwrap(), p);
         for (sampling, name) in [
-            (Sampling::Probe(RayProbing { points: 16, rays: 2, region: 0 }), "probe:16:2"),
-            (Sampling::Probe(RayProbing { points: 32, rays: 4, region: 32768 }), "probe:32:4:32768"),
+            (Sampling::Probe(RayProbing { points: 16, rays: 2, region: 0, nearest: 16 }), "probe:16:2"),
+            (Sampling::Probe(RayProbing { points: 32, rays: 4, region: 32768, nearest: 32 }), "probe:32:4:32768"),
+            (Sampling::Probe(RayProbing { points: 32, rays: 4, region: 24576, nearest: 8 }), "probe:32:4:24576:8"),
+            (Sampling::Probe(RayProbing { points: 32, rays: 4, region: 0, nearest: 4 }), "probe:32:4:0:4"),
             (Sampling::Interior(5), "5"),
             (Sampling::CORNERS, "corners"),
         ] {
@@ -538,15 +540,19 @@ mod tests {
 
     #[test]
     fn sampling_names_round_trip() {
-        for s in ["corners", "7", "adaptive:2:16", "probe:32:4", "probe:32:4:32768"] {
+        for s in ["corners", "7", "adaptive:2:16", "probe:32:4", "probe:32:4:32768", "probe:32:4:24576:8"] {
             assert_eq!(s.parse::<Sampling>().unwrap().to_string(), s);
         }
         assert_eq!("adaptive".parse::<Sampling>().unwrap(), Sampling::Adaptive(AdaptiveSampling::DEFAULT));
         assert_eq!("probe:32:4:0".parse::<Sampling>().unwrap().to_string(), "probe:32:4");
         assert_eq!("region".parse::<Sampling>().unwrap().to_string(), "probe:32:4:24576");
+        // Every point searching is the default, not written.
+        assert_eq!("probe:32:4:24576:32".parse::<Sampling>().unwrap().to_string(), "probe:32:4:24576");
         let unknown = "halton".parse::<Sampling>().unwrap_err();
         assert!(unknown.contains("adaptive[:SEEDS:BUDGET]") && unknown.contains("region"), "{unknown}");
-        for bad in ["probe:32:4:many", "probe:32:4:-1", "probe:32:4:16777217", "probe:32:4:5:6", "probe:32"] {
+        for bad in
+            ["probe:32:4:many", "probe:32:4:-1", "probe:32:4:16777217", "probe:32:4:5:33", "probe:32:4:5:0", "probe:32:4:5:6:7", "probe:32"]
+        {
             assert!(bad.parse::<Sampling>().is_err(), "{bad}");
         }
     }

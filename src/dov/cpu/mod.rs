@@ -272,9 +272,58 @@ impl RayCaster for CpuBackend {
         self.first_hits_fast::<false>(&rays)
     }
 
+    /// Sorted by direction (cube face, then Morton order on it), so that rays side by side go
+    /// the same way; in packets where the CPU has AVX2 ([`CpuBackend::set_packets`]), else one
+    /// after another by the fast path.
+    fn first_hits_from(&self, origin: Vec3, rays: &[(Vec3, f32)]) -> Vec<u32> {
+        let scaled: Vec<(Vec3A, f32)> = rays
+            .iter()
+            .map(|&(d, reach)| {
+                let (_, d, bound) = texel_scaled(origin, d, reach);
+                (d, bound)
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..rays.len() as u32).collect();
+        order.sort_by_cached_key(|&i| direction_order(scaled[i as usize].0));
+        let sorted: Vec<(Vec3A, f32)> = order.iter().map(|&i| scaled[i as usize]).collect();
+        let o = Vec3A::from(origin);
+        #[cfg(target_arch = "x86_64")]
+        let traced = if self.wide && self.packets {
+            // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+            unsafe { self.first_hits_from_packets(o, &sorted) }
+        } else {
+            let sorted: Vec<(Vec3A, Vec3A, f32)> = sorted.iter().map(|&(d, bound)| (o, d, bound)).collect();
+            // SAFETY: as above.
+            if self.wide { unsafe { self.first_hits_wide(&sorted) } } else { self.first_hits_fast::<false>(&sorted) }
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let traced = self.first_hits_fast::<false>(&sorted.iter().map(|&(d, bound)| (o, d, bound)).collect::<Vec<_>>());
+        let mut ids = vec![NO_OBJECT; rays.len()];
+        for (&i, id) in order.iter().zip(traced) {
+            ids[i as usize] = id;
+        }
+        ids
+    }
+
     fn targets(&self) -> &SurfaceTargets {
         &self.targets
     }
+}
+
+/// Where a direction (largest component ±1) sorts among a point's rays: its cube face, then the
+/// Morton order of its place on the face, so that neighbours in the order point nearly the same
+/// way.
+fn direction_order(d: Vec3A) -> u64 {
+    let a = d.abs();
+    let (axis, u, v) = if a.x >= a.y && a.x >= a.z {
+        (0, d.y, d.z)
+    } else if a.y >= a.z {
+        (1, d.x, d.z)
+    } else {
+        (2, d.x, d.y)
+    };
+    let face = 2 * axis as u64 + u64::from(d[axis] < 0.0);
+    face << 30 | u64::from(crate::geom::morton3(Vec3::new(0.5 * (u + 1.0), 0.5 * (v + 1.0), 0.0)))
 }
 
 /// The most world-space triangles one BLAS takes. A bigger world goes into several BLASes of
@@ -467,6 +516,31 @@ mod tests {
             for reach in [f32::INFINITY, 1.0, 6.0] {
                 let one_by_one: Vec<u32> = rays.iter().map(|&(o, d)| cpu.first_hit(o, d, reach)).collect();
                 prop_assert_eq!(cpu.first_hits(&rays, reach), one_by_one);
+            }
+        }
+
+        /// Rays from one origin (a probe point's aimed rays, a footprint's texels) get each ray's
+        /// own first hit within its own reach, in the order given, by packets and without:
+        /// directions spread over the sphere and bunched, so that packets are mixed.
+        #[test]
+        fn first_hits_from_one_origin_are_first_hit_ray_by_ray(
+            origin in vec3a(),
+            rays in prop::collection::vec((vec3a(), prop_oneof![Just(f32::INFINITY), 0.05f32..3.0]), 1..80),
+            bunched in vec3a(),
+        ) {
+            let scene = boxes();
+            let mut cpu = CpuBackend::new(&scene, 8).unwrap();
+            let rays: Vec<(Vec3, f32)> = rays
+                .iter()
+                .enumerate()
+                .map(|(k, &(d, reach))| if k % 3 == 0 { (d, reach) } else { (bunched + 0.05 * d, reach) })
+                .map(|(d, reach)| (Vec3::from(d), reach))
+                .filter(|(d, _)| d.abs().max_element() > 0.0)
+                .collect();
+            let one_by_one: Vec<u32> = rays.iter().map(|&(d, reach)| cpu.first_hit(origin.into(), d, reach)).collect();
+            for packets in [true, false] {
+                cpu.set_packets(packets);
+                prop_assert_eq!(cpu.first_hits_from(origin.into(), &rays), one_by_one.clone());
             }
         }
 

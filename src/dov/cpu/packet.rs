@@ -226,6 +226,17 @@ pub(super) fn min_where(a: Lanes, b: Lanes, mask: Lanes) -> Lanes {
     v
 }
 
+/// The lanes where `a < b` (ordered: false where either is NaN), as a lane set.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) fn less_than(a: Lanes, b: Lanes) -> u32 {
+    let mut bits = 0u32;
+    for h in 0..HALVES {
+        bits |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a[h], b[h])) as u32) << (8 * h);
+    }
+    bits
+}
+
 /// In the lanes of `mask`, `b`; `a` in the others.
 #[target_feature(enable = "avx2")]
 #[inline]

@@ -12,7 +12,7 @@ mod interior;
 mod probe;
 
 pub use adaptive::sample_cell;
-pub use probe::{CellProbe, Leads, probe_cell, region_finds};
+pub use probe::{Candidate, CellProbe, Leads, probe_cell, region_finds};
 
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::Result;
@@ -37,6 +37,8 @@ pub struct CellSite<'a> {
     /// The corners of the neighbouring cells within [`CellSampler::corner_ring`] (the widest
     /// ring any sampler of the build asks for), measured; the cell's own corners not included.
     pub nearby: &'a [&'a PointDov],
+    /// Where each of `nearby` is.
+    pub nearby_at: &'a [glam::Vec3],
     /// Every object's world box.
     pub object_bounds: &'a [Aabb],
     /// The cube map of the measurements.

@@ -24,7 +24,7 @@
 //! from all over the cell in every direction ([`region_finds`]); what they meet is seen, and what
 //! the neighbouring cells' region rays meet becomes a candidate here (`precompute`).
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 
 
 use glam::Vec3;
@@ -45,51 +45,130 @@ use crate::grid::{ViewCell, ViewGrid};
 /// rounding); what lies behind cannot change the answer.
 const TARGET_REACH: f32 = 1.001;
 
-/// The probe points of a cell and how rays go from them towards an object's targets.
+/// The probe points of a cell and how rays go from them towards objects' targets.
 struct Aim<'a> {
     rays: &'a dyn RayCaster,
     points: &'a [Vec3],
-    /// Whether each point lies outside geometry (only those cast).
-    outside: &'a [bool],
+    /// The points outside geometry (only those cast), in point order.
+    outside: &'a [usize],
     per_point: usize,
+    /// How many points search for a candidate seen nearby ([`RayProbing::nearest`]).
+    nearest: usize,
 }
 
 impl Aim<'_> {
-    /// Casts `per_point` rays from each probe point outside geometry towards `object`'s targets
-    /// (each point its own targets), calling `on_hit(point, id)` with each first hit until it
-    /// returns false; returns the rays cast. The rays go in batches of [`AIM_BATCH`], one point's
-    /// after another's, so that each is bounded first by the last one's nearest hit (a hidden
-    /// candidate's rays meet the same walls); a batch's rays after the one that stops are cast
-    /// and not reported.
-    fn each_ray(&self, object: u32, mut on_hit: impl FnMut(usize, u32) -> bool) -> u64 {
-        let mut cast = 0;
-        let mut batch: Vec<(Vec3, Vec3)> = Vec::with_capacity(AIM_BATCH);
-        let mut from: Vec<usize> = Vec::with_capacity(AIM_BATCH);
-        let mut rays = self.points.iter().enumerate().filter(|&(i, _)| self.outside[i]).flat_map(|(i, &p)| {
-            (0..self.per_point).map(move |j| (i, p, self.rays.targets().target(object, i * self.per_point + j) - p))
-        });
-        loop {
-            batch.clear();
-            from.clear();
-            for (i, p, d) in rays.by_ref().filter(|r| r.2.length_squared() > 0.0).take(AIM_BATCH) {
-                batch.push((p, d));
-                from.push(i);
-            }
-            if batch.is_empty() {
-                return cast;
-            }
-            cast += batch.len() as u64;
-            for (&i, id) in from.iter().zip(self.rays.first_hits(&batch, TARGET_REACH)) {
-                if !on_hit(i, id) {
-                    return cast;
+    /// The rays from point `i` towards each of `objects`' targets (`per_point` each: point `i`
+    /// takes its own targets), traced together ([`RayCaster::first_hits_from`]): for each ray,
+    /// the object it was aimed at and the id it met first.
+    fn rays_from_point(&self, i: usize, objects: &[u32]) -> Vec<(u32, u32)> {
+        let p = self.points[i];
+        let targets = self.rays.targets();
+        let (mut rays, mut aimed_at) = (Vec::new(), Vec::new());
+        for &object in objects {
+            for j in 0..self.per_point {
+                let d = targets.target(object, i * self.per_point + j) - p;
+                if d.length_squared() > 0.0 {
+                    rays.push((d, TARGET_REACH));
+                    aimed_at.push(object);
                 }
             }
         }
+        let ids = self.rays.first_hits_from(p, &rays);
+        aimed_at.into_iter().zip(ids).collect()
+    }
+
+    /// Searches for `candidates` (those not `seen` nor `settled`), each from its own points:
+    /// the `nearest` points outside geometry nearest the places it was seen from, or every one
+    /// for a candidate with no such place; [`AIM_ROUND`] points a round, each
+    /// point's rays at all the candidates it aims at that round traced together, until every
+    /// candidate has been met (its rays' first hit is the candidate, front or back) or has used
+    /// its points. Returns each unseen object that a ray met first, with the point the ray came
+    /// from (a candidate's rays may meet others first), and the rays cast.
+    fn search(&self, candidates: &[Candidate], seen: &HashSet<u32>, settled: &HashSet<u32>) -> (Vec<(u32, usize)>, u64) {
+        let mut left: Vec<(u32, Vec<usize>)> = candidates
+            .iter()
+            .filter(|c| !seen.contains(&c.object) && !settled.contains(&c.object))
+            .map(|c| (c.object, self.guided_points(&c.seen_from)))
+            .collect();
+        let (mut met, mut cast) = (Vec::new(), 0u64);
+        for round in 0.. {
+            // Each point's candidates this round, by point.
+            let mut by_point: BTreeMap<usize, Vec<u32>> = BTreeMap::new();
+            for (object, points) in &left {
+                for &i in points.iter().skip(round * AIM_ROUND).take(AIM_ROUND) {
+                    by_point.entry(i).or_default().push(*object);
+                }
+            }
+            if by_point.is_empty() {
+                break;
+            }
+            let hits: Vec<(usize, Vec<(u32, u32)>)> =
+                by_point.into_par_iter().map(|(i, objects)| (i, self.rays_from_point(i, &objects))).collect();
+            let mut reached = HashSet::new();
+            for (i, rays) in hits {
+                cast += rays.len() as u64;
+                for (aimed_at, id) in rays {
+                    let object = id & !BACK_FACE_BIT;
+                    if id != NO_OBJECT && !seen.contains(&object) {
+                        met.push((object, i));
+                    }
+                    if object == aimed_at {
+                        reached.insert(aimed_at);
+                    }
+                }
+            }
+            left.retain(|c| !reached.contains(&c.0));
+        }
+        (met, cast)
+    }
+
+    /// The points outside geometry that aim at a candidate seen from `seen_from`: the `nearest`
+    /// ones nearest any of those places, nearest first (among equals, in point order); every
+    /// one, in point order, where it is empty. Views change continuously, so a
+    /// part of the cell that sees what a neighbour's corner or ray saw is likeliest near it.
+    fn guided_points(&self, seen_from: &[Vec3]) -> Vec<usize> {
+        if seen_from.is_empty() {
+            return self.outside.to_vec();
+        }
+        let distance = |i: usize| seen_from.iter().map(|q| q.distance_squared(self.points[i])).fold(f32::INFINITY, f32::min);
+        let mut order: Vec<(f32, usize)> = self.outside.iter().map(|&i| (distance(i), i)).collect();
+        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        order.into_iter().take(self.nearest).map(|(_, i)| i).collect()
+    }
+
+    /// For each of `objects`, how many of each point's rays at it meet it first (front or back),
+    /// point by point; and the rays cast.
+    fn hits_by_point(&self, objects: &[u32]) -> (Vec<Vec<u32>>, u64) {
+        let slot: HashMap<u32, usize> = objects.iter().enumerate().map(|(k, &o)| (o, k)).collect();
+        let traced: Vec<(usize, Vec<(u32, u32)>)> =
+            self.outside.par_iter().map(|&i| (i, self.rays_from_point(i, objects))).collect();
+        let mut hits = vec![vec![0u32; self.points.len()]; objects.len()];
+        let mut cast = 0;
+        for (i, rays) in traced {
+            cast += rays.len() as u64;
+            for (aimed_at, id) in rays {
+                if id & !BACK_FACE_BIT == aimed_at {
+                    hits[slot[&aimed_at]][i] += 1;
+                }
+            }
+        }
+        (hits, cast)
     }
 }
 
-/// Aimed rays traced together (see [`Aim::each_ray`]).
-const AIM_BATCH: usize = 32;
+/// Probe points whose aimed rays go out together before the candidates they met are dropped: a
+/// candidate seen from the first points costs few rays, and a round's rays at all its
+/// candidates trace together.
+const AIM_ROUND: usize = 4;
+
+/// An object to probe for, and where nearby it was seen from (the neighbouring cells' corners
+/// and region rays' origins that met it); none when it is a candidate because its box meets the
+/// cell.
+#[derive(Clone, Debug, Default)]
+pub struct Candidate {
+    pub object: u32,
+    pub seen_from: Vec<Vec3>,
+}
 
 /// Directions from a point for telling whether it lies inside geometry: the 26 neighbours of a
 /// cube's centre.
@@ -103,8 +182,8 @@ fn inside_test_directions() -> impl Iterator<Item = Vec3> {
 /// [`crate::dov::sampling::is_inside`] leaves out measured ones.
 fn is_inside(rays: &dyn RayCaster, p: Vec3) -> bool {
     let (mut back, mut hits) = (0, 0);
-    for d in inside_test_directions() {
-        let id = rays.first_hit(p, d, f32::INFINITY);
+    let directions: Vec<(Vec3, f32)> = inside_test_directions().map(|d| (d, f32::INFINITY)).collect();
+    for id in rays.first_hits_from(p, &directions) {
         hits += usize::from(id != NO_OBJECT);
         back += usize::from(id != NO_OBJECT && id & BACK_FACE_BIT != 0);
     }
@@ -128,7 +207,7 @@ pub struct Leads<'a> {
     /// The objects its measured points see (not probed).
     pub seen: &'a std::collections::HashSet<u32>,
     /// The objects to probe.
-    pub candidates: &'a [u32],
+    pub candidates: &'a [Candidate],
     /// What the cell's own region rays met ([`region_finds`]).
     pub region: &'a [(u32, Vec3)],
 }
@@ -145,78 +224,52 @@ pub fn probe_cell(
 ) -> CellProbe {
     let Leads { seen, candidates, region } = *leads;
     let points: Vec<Vec3> = (1..=probing.points).map(|k| halton_point(cell, k)).collect();
-    let outside: Vec<bool> = points.par_iter().map(|&p| !is_inside(rays, p)).collect();
-    let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize };
+    let outside: Vec<usize> = (0..points.len()).into_par_iter().filter(|&i| !is_inside(rays, points[i])).collect();
+    let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize, nearest: probing.nearest as usize };
     let mut cast = 26 * points.len() as u64;
-    // Per candidate: the unseen objects its rays meet first, itself included, each with the
-    // point the ray came from; and the rays cast.
-    let searched: Vec<(Vec<(u32, usize)>, u64)> = candidates
-        .par_iter()
-        .filter(|c| !seen.contains(c))
-        .map(|&c| {
-            let mut met = Vec::new();
-            let n = aim.each_ray(c, |i, id| {
-                let object = id & !BACK_FACE_BIT;
-                if id != NO_OBJECT && !seen.contains(&object) {
-                    met.push((object, i));
-                }
-                object != c
-            });
-            (met, n)
-        })
-        .collect();
-    // Each found object with a point that sees it.
-    let mut found: Vec<(u32, usize)> = Vec::new();
-    for (met, n) in searched {
-        cast += n;
-        found.extend(met);
-    }
+    // What the cell's own region rays met is seen from the cell: no need to search for it.
+    let settled: HashSet<u32> = region.iter().map(|f| f.0).filter(|o| !seen.contains(o)).collect();
+    // The unseen objects the candidates' rays meet first, candidates included, each with the
+    // point that met it first.
+    let (mut found, n) = aim.search(candidates, seen, &settled);
+    cast += n;
     found.sort_unstable();
     found.dedup_by_key(|f| f.0);
-    // What the region's rays met and nothing else found is seen from their origin.
+    // And what the region's rays met that nothing else found, with their origin.
     let by_region: Vec<(u32, Vec3)> = region
         .iter()
         .copied()
         .filter(|&(o, _)| !seen.contains(&o) && found.binary_search_by_key(&o, |f| f.0).is_err())
         .collect();
-    // A found object's DoV is taken at the point whose rays meet it most (the likeliest to see
-    // most of it), on its footprint there.
-    let measured: Vec<(usize, f64, u64, u64)> = found
+    // A found object's DoV is taken at the probe point whose rays meet it most (the likeliest to
+    // see most of it), on its footprint there; without any, where it was met: the point whose
+    // ray met it on the way to another, or the region ray's origin.
+    let objects: Vec<u32> = found.iter().map(|f| f.0).chain(by_region.iter().map(|f| f.0)).collect();
+    let (hits, n) = aim.hits_by_point(&objects);
+    cast += n;
+    // The place each is measured from: a probe point, or (after them) a region ray's origin.
+    let met_at = found.iter().map(|f| (f.1, None)).chain(by_region.iter().map(|f| (points.len(), Some(f.1))));
+    let measured: Vec<(usize, f64, u64)> = objects
         .par_iter()
-        .map(|&(object, seen_from)| {
-            let mut hits = vec![0u32; points.len()];
-            let n = aim.each_ray(object, |i, id| {
-                hits[i] += u32::from(id & !BACK_FACE_BIT == object);
-                true
-            });
-            // Most hits; among equals, the earlier (better spread) point; without any (an object
-            // met on the way to another), the point that met it.
-            let best = (0..points.len())
-                .filter(|&i| hits[i] > 0)
-                .min_by_key(|&i| (std::cmp::Reverse(hits[i]), i))
-                .unwrap_or(seen_from);
-            let (dov, f) = footprint_dov(rays, cube, points[best], object, &bounds[object as usize]);
-            (best, dov, n, f)
+        .zip(hits.par_iter())
+        .zip(met_at.collect::<Vec<_>>().into_par_iter().enumerate())
+        .map(|((&object, hits), (k, (seen_from, origin)))| {
+            // Most hits; among equals, the earlier (better spread) point.
+            let best = (0..points.len()).filter(|&i| hits[i] > 0).min_by_key(|&i| (std::cmp::Reverse(hits[i]), i));
+            let (at, p) = match (best, origin) {
+                (Some(i), _) => (i, points[i]),
+                (None, Some(origin)) => (points.len() + k, origin),
+                (None, None) => (seen_from, points[seen_from]),
+            };
+            let (dov, f) = footprint_dov(rays, cube, p, object, &bounds[object as usize]);
+            (at, dov, f)
         })
         .collect();
     let mut footprint_rays = 0;
     let mut by_point: HashMap<usize, Vec<(u32, f64)>> = HashMap::new();
-    for (&(object, _), (i, dov, n, footprint)) in found.iter().zip(measured) {
-        cast += n;
+    for (&object, (at, dov, footprint)) in objects.iter().zip(measured) {
         footprint_rays += footprint;
-        by_point.entry(i).or_default().push((object, dov));
-    }
-    // A region find is measured at its ray's origin, which becomes a point of its own.
-    let measured_region: Vec<(u32, f64, u64)> = by_region
-        .par_iter()
-        .map(|&(object, origin)| {
-            let (dov, f) = footprint_dov(rays, cube, origin, object, &bounds[object as usize]);
-            (object, dov, f)
-        })
-        .collect();
-    for (k, (object, dov, footprint)) in measured_region.into_iter().enumerate() {
-        footprint_rays += footprint;
-        by_point.entry(points.len() + k).or_default().push((object, dov));
+        by_point.entry(at).or_default().push((object, dov));
     }
     let mut out: Vec<PointDov> = by_point
         .into_values()
@@ -330,17 +383,23 @@ pub fn region_and_border_finds(
     while !frontier.is_empty() && cast < budget {
         let room = ((budget - cast) / fan.len() as u64).max(1) as usize;
         frontier.truncate(room);
-        let rays: Vec<(Vec3, Vec3)> = frontier
-            .iter()
-            .flat_map(|&(_, (origin, d))| {
+        // Each find's fan from its ray's origin, traced together (one narrow bundle): each ray
+        // (origin, direction) with what it met.
+        let rays: Vec<((Vec3, Vec3), u32)> = frontier
+            .par_iter()
+            .flat_map_iter(|&(_, (origin, d))| {
                 let (u, v) = d.any_orthonormal_pair();
-                fan.iter().map(move |&(a, phi)| (origin, (d * a.cos() + (u * phi.cos() + v * phi.sin()) * a.sin()).normalize()))
+                let fan: Vec<(Vec3, f32)> = fan
+                    .iter()
+                    .map(|&(a, phi)| ((d * a.cos() + (u * phi.cos() + v * phi.sin()) * a.sin()).normalize(), f32::INFINITY))
+                    .collect();
+                let ids = caster.first_hits_from(origin, &fan);
+                fan.into_iter().map(move |(d, _)| (origin, d)).zip(ids)
             })
             .collect();
-        cast += rays.len() as u64;
-        let ids: Vec<u32> = rays.par_chunks(REGION_CHUNK).flat_map_iter(|chunk| caster.first_hits(chunk, f32::INFINITY)).collect();
         let mut next = Vec::new();
-        for (ray, id) in rays.into_iter().zip(ids) {
+        for (ray, id) in rays {
+            cast += 1;
             if id != NO_OBJECT && id & BACK_FACE_BIT == 0 && !found.contains_key(&id) {
                 found.insert(id, ray);
                 next.push((id, ray));
@@ -399,7 +458,8 @@ fn footprint_sum(rays: &dyn RayCaster, cube: &CubeMap, p: Vec3, object: u32, b: 
     let texel = 2.0 / r as f64;
     let offsets: Vec<f64> = (0..sub).map(|k| texel * ((k as f64 + 0.5) / sub as f64 - 0.5)).collect();
     let share = 1.0 / (sub * sub) as f64;
-    let (mut sum, mut cast) = (0.0f64, 0u64);
+    // Each ray that enters the box, with its texel's weight; traced together from `p`.
+    let (mut footprint, mut weights) = (Vec::new(), Vec::new());
     for face in 0..FACE_COUNT {
         let basis = face_basis(face);
         let Some((cols, rows)) = face_rect(&corners, basis, r) else { continue };
@@ -410,17 +470,17 @@ fn footprint_sum(rays: &dyn RayCaster, cube: &CubeMap, p: Vec3, object: u32, b: 
                     for du in &offsets {
                         let d = uv_direction(face, u + du, v - dv);
                         let Some(exit) = box_exit(p, d, b) else { continue };
-                        cast += 1;
                         // Nothing beyond the box can be the object.
-                        if rays.first_hit(p, d, exit * TARGET_REACH) & !BACK_FACE_BIT == object {
-                            sum += cube.weight(row, col) * share;
-                        }
+                        footprint.push((d, exit * TARGET_REACH));
+                        weights.push(cube.weight(row, col) * share);
                     }
                 }
             }
         }
     }
-    (sum, cast)
+    let ids = rays.first_hits_from(p, &footprint);
+    let sum = ids.iter().zip(&weights).filter(|(id, _)| **id & !BACK_FACE_BIT == object).map(|(_, w)| w).sum();
+    (sum, footprint.len() as u64)
 }
 
 /// Coordinate `axis` of box corner `i` (bit `axis` of `i` picks max).
@@ -506,30 +566,39 @@ impl Probe {
     }
 
     /// The objects that the region rays of the cells within [`REGION_RING`] of `cell` (itself
-    /// left out) met, which no point of `cell` saw and which are not candidates already: nearest
-    /// cells first, as many as probing them would cost the cell's own region rays at most.
-    fn region_candidates(&self, cell: &CellSite, seen: &HashSet<u32>, candidates: &HashSet<u32>) -> HashSet<u32> {
+    /// left out) met, which no point of `cell` saw and which are not candidates already, each with
+    /// the origins of the rays that met it: nearest ring first (by object within a ring), as many
+    /// objects as probing them would cost the cell's own region rays at most.
+    fn region_candidates(
+        &self,
+        cell: &CellSite,
+        seen: &HashSet<u32>,
+        candidates: &BTreeMap<u32, Vec<Vec3>>,
+    ) -> BTreeMap<u32, Vec<Vec3>> {
         let p = self.probing;
         let cap = (p.region / (p.points * p.rays).max(1)) as usize;
-        let mut ring_of: Vec<(u32, u32)> = cell
-            .grid
-            .neighbourhood_view_cells(cell.coords, REGION_RING)
-            .into_iter()
-            .filter(|&n| n != cell.id)
-            .flat_map(|n| {
-                let c = cell.grid.cell_coords(n);
-                let ring = (0..3).map(|a| c[a].abs_diff(cell.coords[a])).max().unwrap_or(0);
-                self.region.get(&n).into_iter().flatten().map(move |f| (ring, f.0))
-            })
-            .filter(|&(_, o)| !seen.contains(&o) && !candidates.contains(&o))
-            .collect();
-        ring_of.sort_unstable();
-        let mut taken = HashSet::new();
-        for (_, o) in ring_of {
+        let mut by_ring: Vec<Vec<usize>> = vec![Vec::new(); REGION_RING as usize + 1];
+        for n in cell.grid.neighbourhood_view_cells(cell.coords, REGION_RING) {
+            let c = cell.grid.cell_coords(n);
+            by_ring[(0..3).map(|a| c[a].abs_diff(cell.coords[a])).max().unwrap_or(0) as usize].push(n);
+        }
+        let mut taken: BTreeMap<u32, Vec<Vec3>> = BTreeMap::new();
+        // The cell itself is ring 0.
+        for ring in &by_ring[1..] {
             if taken.len() == cap {
                 break;
             }
-            taken.insert(o);
+            let mut finds: Vec<(u32, Vec3)> = ring
+                .iter()
+                .flat_map(|n| self.region.get(n).into_iter().flatten().copied())
+                .filter(|(o, _)| !seen.contains(o) && !candidates.contains_key(o))
+                .collect();
+            finds.sort_by_key(|f| f.0);
+            for (o, origin) in finds {
+                if taken.len() < cap || taken.contains_key(&o) {
+                    taken.entry(o).or_default().push(origin);
+                }
+            }
         }
         taken
     }
@@ -573,15 +642,27 @@ impl CellSampler for Probe {
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
         let caster = backend.ray_caster().expect("prepare refuses a backend without a ray caster");
         let seen = seen_by(cell.corners.iter().copied().chain(points.iter()));
-        let mut candidates = seen_by(cell.nearby.iter().copied());
-        candidates.extend((0..cell.object_bounds.len() as u32).filter(|&o| cell.object_bounds[o as usize].intersects(&cell.bounds)));
+        // Candidates, each with where nearby it was seen: what the neighbouring cells' corners
+        // see, what meets the cell, and what their region rays met.
+        let mut candidates: BTreeMap<u32, Vec<Vec3>> = BTreeMap::new();
+        for (corner, &at) in cell.nearby.iter().zip(cell.nearby_at) {
+            if crate::dov::sampling::is_inside(corner) {
+                continue;
+            }
+            for &(o, _) in &corner.objects {
+                candidates.entry(o).or_default().push(at);
+            }
+        }
+        for o in (0..cell.object_bounds.len() as u32).filter(|&o| cell.object_bounds[o as usize].intersects(&cell.bounds)) {
+            candidates.entry(o).or_default();
+        }
         if self.probing.region > 0 {
             let nearby = self.region_candidates(cell, &seen, &candidates);
             candidates.extend(nearby);
         }
         // probe_cell skips the seen ones.
-        let mut candidates: Vec<u32> = candidates.into_iter().collect();
-        candidates.sort_unstable();
+        let candidates: Vec<Candidate> =
+            candidates.into_iter().map(|(object, seen_from)| Candidate { object, seen_from }).collect();
         let own = self.region.get(&cell.id).map_or(&[][..], Vec::as_slice);
         let leads = Leads { seen: &seen, candidates: &candidates, region: own };
         let probe = probe_cell(caster, cell.cube, &cell.view_cell(), &leads, cell.object_bounds, &self.probing);
@@ -637,6 +718,25 @@ mod tests {
             expected.sort_by_key(|e| e.0);
             assert!(expected.len() >= 3, "{} objects found", expected.len());
             assert_eq!(region_finds(&cpu, &cell, &sequence), expected);
+        }
+    }
+
+    /// A candidate seen nearby is searched for from the NEAREST points outside geometry nearest
+    /// the places that saw it, nearest first; one seen from nowhere nearby (its box meets the
+    /// cell) from every point outside geometry, in point order.
+    #[test]
+    fn candidates_are_searched_for_from_the_points_nearest_where_they_were_seen() {
+        let cpu = CpuBackend::new(&boxes(), 16).unwrap();
+        let points: Vec<Vec3> = (0..8).map(|i| Vec3::new(i as f32, 0.0, 0.0)).collect();
+        // Point 4 lies inside geometry.
+        let outside = [0, 1, 2, 3, 5, 6, 7];
+        let aim = |nearest| Aim { rays: &cpu, points: &points, outside: &outside, per_point: 4, nearest };
+        assert_eq!(aim(3).guided_points(&[Vec3::new(6.2, 0.0, 0.0)]), [6, 7, 5]);
+        // Two places: the nearer of the two counts; among equals, point order.
+        assert_eq!(aim(3).guided_points(&[Vec3::ZERO, Vec3::new(7.0, 0.0, 0.0)]), [0, 7, 1]);
+        assert_eq!(aim(8).guided_points(&[Vec3::new(4.0, 0.0, 0.0)]), [3, 5, 2, 6, 1, 7, 0]);
+        for nearest in [1, 3, 8] {
+            assert_eq!(aim(nearest).guided_points(&[]), outside);
         }
     }
 
