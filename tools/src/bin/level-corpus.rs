@@ -357,10 +357,14 @@ fn print_table(rows: &[LevelRow]) {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in rows {
-        let ratio = |k: usize, of: usize| mean(r.answered.iter().filter(|m| m[of] > 0.0).map(|m| m[k] / m[of]));
+        // "–" where no viewpoint has the reference (a scene that ships no PVS).
+        let ratio = |k: usize, of: usize, digits: usize| {
+            let ratios: Vec<f64> = r.answered.iter().filter(|m| m[of] > 0.0).map(|m| m[k] / m[of]).collect();
+            if ratios.is_empty() { "–".to_string() } else { format!("{:.digits$}×", mean(ratios.into_iter())) }
+        };
         let wrong: Vec<f64> = r.answered.iter().map(|m| m[4]).collect();
         println!(
-            "| {} | {} | {} | {} | {} of {} | {:.1} | {} of {} | {:.2}× | {:.2}× | {:.1}× | {:.1e} | {:.1e} | {:.1e} |",
+            "| {} | {} | {} | {} | {} of {} | {:.1} | {} of {} | {} | {} | {} | {:.1e} | {:.1e} | {:.1e} |",
             r.name,
             r.parts,
             r.triangles,
@@ -370,9 +374,9 @@ fn print_table(rows: &[LevelRow]) {
             r.build_s,
             r.refused,
             r.viewpoints,
-            ratio(0, 2),
-            ratio(1, 2),
-            ratio(0, 3),
+            ratio(0, 2, 2),
+            ratio(1, 2, 2),
+            ratio(0, 3, 1),
             mean(wrong.iter().copied()),
             quantile(&wrong, 0.99),
             wrong.iter().copied().fold(0.0, f64::max)
