@@ -87,7 +87,7 @@ fn probed_builds_record_their_sampler_and_keep_what_corners_see() {
     // The default is region rays (decision 98), with both floors.
     let default = build("default", &["--backend", "cpu"]);
     assert_eq!(default["build"]["visibility"]["sampling"], "probe:32:4:24576");
-    assert_eq!(default["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box", "neighbours"]));
+    assert_eq!(default["build"]["visibility"]["zero_dov_floor"], serde_json::json!(["box", "neighbours", "parts"]));
     let bare = ["--backend", "cpu", "--zero-dov-floor", "none"];
     let corners = build("corners", &[&bare[..], &["--samples", "corners"]].concat());
     assert_eq!(corners["build"]["visibility"]["sampling"], "corners");

@@ -51,6 +51,7 @@ fn flat_shape(objects: usize) -> TreeShape {
     TreeShape {
         object_leaf: (0..objects as u32).collect(),
         node_parent: (0..=objects).map(|n| (n < objects).then_some(objects as u32)).collect(),
+        ..Default::default()
     }
 }
 

@@ -33,8 +33,11 @@ fn cpu_and_gpu_give_the_same_cell_dov_on_a_city() {
     }
     let scene = hdov::city::generate(&CityParams { seed: 5, scale: CityScale::Tiny, ..Default::default() }).unwrap();
     let tree = RTree::build(&scene.all_object_bounds(), 8, TreeAlgorithm::Str);
-    let shape =
-        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+    let shape = TreeShape {
+        object_leaf: tree.object_leaves(),
+        node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
+        ..Default::default()
+    };
     let cpu = run(&mut CpuBackend::new(&scene, R).unwrap(), &scene, &shape);
     let gpu = run(&mut GpuBackend::new(&scene, R).unwrap(), &scene, &shape);
     assert_eq!(cpu.len(), gpu.len());

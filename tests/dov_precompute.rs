@@ -44,7 +44,7 @@ fn street() -> (hdov::scene::Scene, TreeShape) {
     let object_leaf = (0..n).map(|o| 1 + o / 2).collect();
     let mut node_parent = vec![None];
     node_parent.extend((0..n / 2).map(|_| Some(0)));
-    (scene, TreeShape { object_leaf, node_parent })
+    (scene, TreeShape { object_leaf, node_parent, ..Default::default() })
 }
 
 fn street_grid() -> ViewGrid {
@@ -120,7 +120,8 @@ fn shards_cover_disjoint_cells_and_merge_to_the_whole() {
 fn node_dov_is_max_of_sums_not_sum_of_maxima() {
     // Two objects under leaf 1, under root 0. Point A sees object 0 a lot and object 1 a little;
     // point B the reverse. Max of sums = 0.35; sum of maxima would be 0.6.
-    let shape = TreeShape { object_leaf: vec![1, 1, 2], node_parent: vec![None, Some(0), Some(0)] };
+    let shape =
+        TreeShape { object_leaf: vec![1, 1, 2], node_parent: vec![None, Some(0), Some(0)], ..Default::default() };
     let point = |objects: Vec<(u32, f64)>| PointDov { resolution: 64, objects, back_face: 0.0, empty: 0.0 };
     let points = [point(vec![(0, 0.30), (1, 0.05)]), point(vec![(0, 0.05), (1, 0.30), (2, 0.01)])];
     let bounds = vec![Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)); 3];
@@ -186,7 +187,7 @@ fn tube_scene() -> (hdov::scene::Scene, u32) {
 #[test]
 fn visible_zero_dov_object_gets_the_one_texel_floor() {
     let (scene, target) = tube_scene();
-    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)] };
+    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)], ..Default::default() };
     // One cell straddling the tube: corners outside it, the centre on its axis.
     let grid = ViewGrid::new(Aabb::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, 1.0, 1.0)), [1, 1, 1]);
     let bounds = scene.all_object_bounds();
@@ -232,7 +233,7 @@ fn visible_zero_dov_object_gets_the_one_texel_floor() {
 #[test]
 fn neighbour_corner_floor_test() {
     let (scene, target) = tube_scene();
-    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)] };
+    let shape = TreeShape { object_leaf: vec![1; 5], node_parent: vec![None, Some(0)], ..Default::default() };
     let grid = ViewGrid::new(Aabb::new(Vec3::new(-1.0, -1.8, -0.2), Vec3::new(1.0, 0.2, 0.2)), [1, 2, 1]);
     let bounds = scene.all_object_bounds();
     let mut backend = CpuBackend::new(&scene, 64).unwrap();
@@ -250,6 +251,35 @@ fn neighbour_corner_floor_test() {
     assert_eq!(with_neighbours.cells[upper].1, plain.cells[upper].1, "a cell that sees it is unchanged");
 }
 
+/// The parts floor: a part next to one that the cell's points see gets the floor, a part further
+/// on or of another object does not, and without the test nothing does.
+#[test]
+fn the_parts_floor_takes_the_parts_next_to_a_seen_part() {
+    let point = PointDov { resolution: 64, objects: vec![(1, 0.01)], back_face: 0.0, empty: 0.0 };
+    // Objects 0–3: parts of one object in a row; 4: another object.
+    let shape = TreeShape {
+        object_leaf: vec![1; 5],
+        node_parent: vec![None, Some(0)],
+        part_neighbours: vec![vec![1], vec![0, 2], vec![1, 3], vec![2], vec![]],
+    };
+    let far = Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0));
+    let bounds = vec![far; 5];
+    let cell = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    let cube = CubeMap::new(64);
+    let floor = cube.texel_floor() as f32;
+    let with = |tests: Vec<FloorTest>| {
+        let options = PrecomputeOptions { zero_dov_tests: tests, ..Default::default() };
+        cell_dov(&[&point], &[], &cell, &bounds, &shape, &options, &cube)
+    };
+    let c = with(vec![FloorTest::PartNeighbours]);
+    assert_eq!([c.object(0), c.object(1), c.object(2), c.object(3), c.object(4)], [floor, 0.01, floor, 0.0, 0.0]);
+    assert_eq!(c.floored, 2);
+    let c = with(vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners]);
+    assert_eq!([c.object(0), c.object(2)], [0.0, 0.0]);
+    assert_eq!("parts".parse::<FloorTest>().unwrap(), FloorTest::PartNeighbours);
+    assert_eq!(FloorTest::PartNeighbours.to_string(), "parts");
+}
+
 #[test]
 fn points_inside_geometry_are_skipped() {
     // A closed box around one corner of a 1-cell grid: that corner sees only back faces.
@@ -257,7 +287,7 @@ fn points_inside_geometry_are_skipped() {
     b.aabox(Vec3::splat(-0.5), Vec3::splat(0.5));
     b.aabox(Vec3::new(5.0, 0.0, 0.0), Vec3::new(6.0, 1.0, 1.0));
     let scene = b.build();
-    let shape = TreeShape { object_leaf: vec![0, 0], node_parent: vec![None] };
+    let shape = TreeShape { object_leaf: vec![0, 0], node_parent: vec![None], ..Default::default() };
     let grid = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::splat(2.0)), [1, 1, 1]);
     let bounds = scene.all_object_bounds();
     let mut backend = CpuBackend::new(&scene, 32).unwrap();

@@ -365,7 +365,11 @@ fn build_visibility(
         backend = WithRays::wrap(backend, scene)?;
     }
     let shape =
-        TreeShape { object_leaf: tree.object_leaves(), node_parent: tree.nodes.iter().map(|n| n.parent).collect() };
+        TreeShape {
+            object_leaf: tree.object_leaves(),
+            node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
+            part_neighbours: crate::scene::parts::part_neighbours(scene),
+        };
     let options = PrecomputeOptions::of(v);
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(

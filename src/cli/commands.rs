@@ -141,10 +141,11 @@ pub struct VisibilityArgs {
     #[arg(long, default_value_t = hdov::DEFAULT_LOD_TOLERANCE_TEXELS, allow_negative_numbers = true)]
     lod_draw_tolerance: f32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
-    /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), or none.
-    /// Default: box,neighbours; box alone with `--samples probe` without region rays (its rays
-    /// check what the neighbour test would guess); with region rays the neighbours test also
-    /// takes what the neighbouring cells' region rays met.
+    /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), parts (a part
+    /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts;
+    /// box alone with `--samples probe` without region rays (its rays check what the neighbour
+    /// test would guess); with region rays the neighbours test also takes what the neighbouring
+    /// cells' region rays met.
     #[arg(long, value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
@@ -159,7 +160,7 @@ impl VisibilityArgs {
         }
         let default_floor = match self.samples {
             Sampling::Probe(p) if p.region == 0 => "box",
-            _ => "box,neighbours",
+            _ => "box,neighbours,parts",
         };
         let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();
         let floor = if given.is_empty() { default_floor.split(',').collect() } else { given };

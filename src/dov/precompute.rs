@@ -28,13 +28,17 @@ use crate::geom::Aabb;
 use crate::grid::ViewGrid;
 use crate::progress::Report;
 
-/// The shape of the object tree, as far as DoV aggregation needs it.
+/// The shape of the object tree, as far as DoV aggregation needs it, and which objects are
+/// neighbouring parts of one file object, as far as the parts floor needs it.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TreeShape {
     /// Leaf node id of each object.
     pub object_leaf: Vec<u32>,
     /// Parent of each node id (`None` for the root).
     pub node_parent: Vec<Option<u32>>,
+    /// Each object's neighbouring parts ([`crate::scene::parts::part_neighbours`]); empty (for
+    /// all objects, or for one) where nothing was cut.
+    pub part_neighbours: Vec<Vec<u32>>,
 }
 
 impl TreeShape {
@@ -100,16 +104,31 @@ impl CellDov {
     }
 }
 
+/// What the floor tests know of a cell.
+pub struct FloorContext<'a> {
+    /// The cell's box.
+    pub cell_box: &'a Aabb,
+    /// The objects that the neighbouring cells' corners (and region rays) see.
+    pub seen_nearby: &'a HashSet<u32>,
+    /// The objects that the cell's own points see.
+    pub seen_here: &'a HashSet<u32>,
+    /// Each object's neighbouring parts ([`TreeShape::part_neighbours`]).
+    pub part_neighbours: &'a [Vec<u32>],
+}
+
 impl FloorTest {
-    /// Whether this test finds `object` (with world box `bounds`) possibly visible from the cell
-    /// `cell_box`; `seen_nearby` holds the objects that the neighbouring cells' corners see.
-    pub fn finds(&self, object: u32, bounds: &Aabb, cell_box: &Aabb, seen_nearby: &HashSet<u32>) -> bool {
+    /// Whether this test finds `object` (with world box `bounds`) possibly visible from the cell.
+    pub fn finds(&self, object: u32, bounds: &Aabb, cell: &FloorContext) -> bool {
         match *self {
             FloorTest::BoxWithin(margin) => {
                 let m = Vec3::splat(margin);
-                !bounds.is_empty() && bounds.intersects(&Aabb::new(cell_box.min - m, cell_box.max + m))
+                !bounds.is_empty() && bounds.intersects(&Aabb::new(cell.cell_box.min - m, cell.cell_box.max + m))
             }
-            FloorTest::NeighbourCorners => seen_nearby.contains(&object),
+            FloorTest::NeighbourCorners => cell.seen_nearby.contains(&object),
+            FloorTest::PartNeighbours => cell
+                .part_neighbours
+                .get(object as usize)
+                .is_some_and(|parts| parts.iter().any(|p| cell.seen_here.contains(p))),
         }
     }
 }
@@ -135,7 +154,7 @@ impl Default for PrecomputeOptions {
     fn default() -> Self {
         Self {
             samplers: Vec::new(),
-            zero_dov_tests: vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
+            zero_dov_tests: FloorTest::DEFAULT.to_vec(),
             skip_inside_points: true,
         }
     }
@@ -325,13 +344,21 @@ pub fn cell_dov(
         let seen_around: HashSet<u32> =
             if options.uses_neighbours() { seen_by(around.iter().copied()) } else { Default::default() };
         let floor = cube.texel_floor();
+        // What the points see, before any floor.
+        let seen_here: HashSet<u32> = object_max.keys().copied().collect();
+        let context = FloorContext {
+            cell_box,
+            seen_nearby: &seen_around,
+            seen_here: &seen_here,
+            part_neighbours: &shape.part_neighbours,
+        };
         for (object, bounds) in object_bounds.iter().enumerate() {
             let object = object as u32;
             if object_max.contains_key(&object) {
                 continue;
             }
             let possibly_visible =
-                options.zero_dov_tests.iter().any(|t| t.finds(object, bounds, cell_box, &seen_around));
+                options.zero_dov_tests.iter().any(|t| t.finds(object, bounds, &context));
             if possibly_visible {
                 object_max.insert(object, floor);
                 floored += 1;

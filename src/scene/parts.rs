@@ -117,6 +117,35 @@ fn submesh(mesh: &Mesh, set: &[u32]) -> Mesh {
     out
 }
 
+/// For each object of `scene`, the other parts of its file object whose world boxes, grown by a
+/// thousandth of the larger one's extent, meet its own: where a cut surface goes on. Empty for
+/// an object that was not cut. The parts of an object are consecutive, numbered from 0
+/// ([`split_large_objects`]). O(parts²) per cut object.
+pub fn part_neighbours(scene: &Scene) -> Vec<Vec<u32>> {
+    let bounds = scene.all_object_bounds();
+    let mut out = vec![Vec::new(); scene.objects.len()];
+    let mut start = 0;
+    while start < scene.objects.len() {
+        let mut end = start + 1;
+        if scene.objects[start].part == Some(0) {
+            while end < scene.objects.len() && scene.objects[end].part == Some((end - start) as u32) {
+                end += 1;
+            }
+        }
+        for i in start..end {
+            for j in i + 1..end {
+                let pad = Vec3::splat(1e-3 * bounds[i].extent().max_element().max(bounds[j].extent().max_element()));
+                if Aabb::new(bounds[i].min - pad, bounds[i].max + pad).intersects(&bounds[j]) {
+                    out[i].push(j as u32);
+                    out[j].push(i as u32);
+                }
+            }
+        }
+        start = end;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use glam::Mat4;
@@ -171,6 +200,36 @@ mod tests {
         let whole = split.objects.iter().find(|o| o.name == "box").unwrap();
         assert_eq!(whole.part, None);
         assert_eq!(split.meshes[whole.mesh as usize].mesh, Mesh::unit_cube());
+    }
+
+    /// A slab cut into a 4 × 4 lattice of parts: each part's neighbours are the parts its box
+    /// touches (edges and corners, 3 to 8 of them), never another object's parts, and an object
+    /// left whole has none.
+    #[test]
+    fn parts_touching_each_other_are_neighbours() {
+        let far = Mat4::from_translation(Vec3::new(100.0, 0.0, 0.0));
+        let scene = scene_of(
+            vec![slab(16.0, 16), Mesh::unit_cube()],
+            &[("floor", 0, Mat4::IDENTITY), ("box", 1, Mat4::IDENTITY), ("other", 0, far)],
+        );
+        let split = split_large_objects(&scene, 4.0);
+        let neighbours = part_neighbours(&split);
+        assert_eq!(neighbours.len(), split.objects.len());
+        let bounds = split.all_object_bounds();
+        for (i, o) in split.objects.iter().enumerate() {
+            let mine = &neighbours[i];
+            if o.part.is_none() {
+                assert!(mine.is_empty(), "{o:?}");
+                continue;
+            }
+            assert!((3..=8).contains(&mine.len()), "{o:?}: {mine:?}");
+            for &j in mine {
+                assert_eq!(split.objects[j as usize].name, o.name);
+                assert!(neighbours[j as usize].contains(&(i as u32)), "symmetric");
+                let gap = (bounds[i].min - bounds[j as usize].max).max(bounds[j as usize].min - bounds[i].max);
+                assert!(gap.max_element() <= 1e-3, "{i} and {j} touch");
+            }
+        }
     }
 
     #[test]

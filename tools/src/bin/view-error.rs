@@ -215,7 +215,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let sampling: Sampling = name.parse()?;
         let floors = match sampling {
             Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
-            _ => vec![FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners],
+            _ => FloorTest::DEFAULT.to_vec(),
         };
         let visibility = VisibilityParams {
             resolution: r,
@@ -258,8 +258,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             let (e, n) = dov_excess(&v.point, |o| stored.get(&o).copied().unwrap_or(0.0), texel, 2.0, 0.01);
             row.excess = (row.excess.0 + e, row.excess.1 + n);
-            let mut named: Vec<(String, f64)> =
-                wrong.iter().map(|&(o, w)| (measured.objects[o as usize].name.clone(), w / v.seen)).collect();
+            let name = |o: u32| {
+                let object = &measured.objects[o as usize];
+                match object.part {
+                    Some(k) => format!("{} [part {k}]", object.name),
+                    None => object.name.clone(),
+                }
+            };
+            let mut named: Vec<(String, f64)> = wrong.iter().map(|&(o, w)| (name(o), w / v.seen)).collect();
             named.sort_by(|a, b| b.1.total_cmp(&a.1));
             named.truncate(3);
             row.worst.push((share, i, named));

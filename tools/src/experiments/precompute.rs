@@ -73,7 +73,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
     }
 
     // Cell DoV of every (R, K) against the reference: the largest R with the most points.
-    let shape = TreeShape { object_leaf: vec![0; bounds.len()], node_parent: vec![None] };
+    let shape = TreeShape { object_leaf: vec![0; bounds.len()], node_parent: vec![None], ..Default::default() };
     let options = PrecomputeOptions { zero_dov_tests: Vec::new(), skip_inside_points: true, ..Default::default() };
     let cell_dovs = |r_index: usize, k: u32| -> Vec<Vec<(u32, f32)>> {
         let (r, _, per_cell) = &measured[r_index];

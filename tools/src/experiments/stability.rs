@@ -206,7 +206,7 @@ pub fn run(ctx: &mut Ctx) -> Result<()> {
             .map_err(err)?;
         let refs: Vec<&PointDov> = corners.iter().collect();
         let outside: Vec<&PointDov> = refs.iter().copied().filter(|p| p.back_face <= 0.5).collect();
-        let shape = TreeShape { object_leaf: vec![0], node_parent: vec![None] };
+        let shape = TreeShape { object_leaf: vec![0], node_parent: vec![None], ..Default::default() };
         let cube = CubeMap::new(R);
         let bounds = scene.all_object_bounds();
         let with = |skip: bool, pts: &[&PointDov]| {

@@ -8,7 +8,7 @@ use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 use hdov::Result;
-use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, TreeShape, cell_dov};
+use hdov::dov::precompute::{CellDov, FloorContext, FloorTest, PrecomputeOptions, TreeShape, cell_dov};
 use hdov::dov::sampling::{halton_point, interior_points, is_inside};
 use hdov::dov::{DovBackend, PointDov};
 use hdov::geom::Aabb;
@@ -183,7 +183,13 @@ pub fn audit_zero_dov(
                 if sparse.contains(&object) {
                     continue;
                 }
-                let floored = audit.test.finds(object, bounds, &cell_box, &around);
+                let cell = FloorContext {
+                    cell_box: &cell_box,
+                    seen_nearby: &around,
+                    seen_here: &sparse,
+                    part_neighbours: &[],
+                };
+                let floored = audit.test.finds(object, bounds, &cell);
                 let seen = by_dense.contains(&object);
                 audit.zero_dov += seen as usize;
                 audit.caught += (seen && floored) as usize;
