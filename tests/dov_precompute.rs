@@ -252,7 +252,8 @@ fn neighbour_corner_floor_test() {
 }
 
 /// The parts floor: a part next to one that the cell's points see gets the floor, a part further
-/// on or of another object does not, and without the test nothing does.
+/// on or of another object does not, and without the test nothing does. (What neighbouring
+/// corners see counts with the neighbours test, which this cell has no corners for.)
 #[test]
 fn the_parts_floor_takes_the_parts_next_to_a_seen_part() {
     let point = PointDov { resolution: 64, objects: vec![(1, 0.01)], back_face: 0.0, empty: 0.0 };

@@ -12,7 +12,7 @@ use hdov::grid::ViewGrid;
 use hdov::progress::Progress;
 use hdov::review::{self, ReviewParams, search};
 use hdov::rtree::{RTree, TreeAlgorithm};
-use hdov::{BuildParams, Database, SessionParams, VisibilityParams};
+use hdov::{BuildParams, Database, ObjectParts, SessionParams, VisibilityParams};
 use hdov_storage::PolicyKind;
 use proptest::prelude::*;
 
@@ -141,7 +141,9 @@ fn cells_follow_the_formulas() {
 fn city(dir: &Path) -> Database {
     let mut scene = hdov_testkit::scenes::city_block(5, true);
     scene.grid = Some(ViewGrid::new(Aabb::new(Vec3::new(-5.0, 1.5, -5.0), Vec3::new(95.0, 2.0, 95.0)), [4, 1, 4]));
+    // The block's own objects (its ground slab whole): the cache figures below are sized to them.
     let params = BuildParams {
+        objects: ObjectParts::File,
         fanout: Some(4),
         visibility: Some(VisibilityParams { resolution: 16, backend: BackendKind::Cpu, ..Default::default() }),
         ..Default::default()

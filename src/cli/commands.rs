@@ -85,10 +85,10 @@ pub struct BuildArgs {
     /// R-tree construction: str (bulk load) or linear (Guttman insertion, the thesis's baseline).
     #[arg(long, default_value = "str")]
     tree: TreeAlgorithm,
-    /// Objects: file (the file's objects as they are) or geometry (each one far larger than a
-    /// cell cut into parts of about two cells: what exporters group by material or storey spans
-    /// the scene; smaller answers, but the samplers miss more of the parts, docs/decisions.md 105).
-    #[arg(long, default_value = "file")]
+    /// Objects: geometry (each one far larger than a cell cut into parts of about two cells:
+    /// what exporters group by material or storey spans the scene, and would be in every
+    /// answer; docs/decisions.md 124) or file (the file's objects as they are).
+    #[arg(long, default_value = "geometry")]
     objects: ObjectParts,
     /// Internal (tree node) LODs: hlod (levels by geometric error) or thesis (§5.6, from the
     /// children's coarsest levels, to reproduce the thesis's figures).

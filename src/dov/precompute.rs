@@ -108,7 +108,8 @@ impl CellDov {
 pub struct FloorContext<'a> {
     /// The cell's box.
     pub cell_box: &'a Aabb,
-    /// The objects that the neighbouring cells' corners (and region rays) see.
+    /// The objects that the neighbouring cells' corners (and region rays) see; empty without
+    /// the neighbours test.
     pub seen_nearby: &'a HashSet<u32>,
     /// The objects that the cell's own points see.
     pub seen_here: &'a HashSet<u32>,
@@ -128,7 +129,7 @@ impl FloorTest {
             FloorTest::PartNeighbours => cell
                 .part_neighbours
                 .get(object as usize)
-                .is_some_and(|parts| parts.iter().any(|p| cell.seen_here.contains(p))),
+                .is_some_and(|parts| parts.iter().any(|p| cell.seen_here.contains(p) || cell.seen_nearby.contains(p))),
         }
     }
 }

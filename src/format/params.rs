@@ -155,7 +155,8 @@ pub enum FloorTest {
     /// layer of corners around its cells).
     NeighbourCorners,
     /// A part that hdov cut (`--objects geometry`) whose neighbouring part of the same file
-    /// object the cell's own points see: a cut surface seen up to a part's edge goes on past it
+    /// object the cell's own points see, or, with [`FloorTest::NeighbourCorners`], what that test
+    /// counts as seen nearby: a cut surface seen up to a part's edge goes on past it
     /// (a strip of ground or a wall seen at a grazing angle through a gap), where rays aimed at
     /// the part's surface rarely land on its visible sliver. Free; finds nothing in a scene whose
     /// objects were not cut.
@@ -266,8 +267,8 @@ pub enum ObjectParts {
     /// The file's objects as they are (one per OBJ group or glTF node instance).
     File,
     /// The file's objects, each one far larger than a cell cut into parts of about two cells
-    /// (`scene::parts`): what an exporter groups by material or storey spans the scene. Not yet
-    /// the default (decision 105).
+    /// (`scene::parts`): what an exporter groups by material or storey spans the scene. The
+    /// default (decision 124).
     Geometry,
 }
 
@@ -317,9 +318,9 @@ pub struct BuildParams {
 impl Default for BuildParams {
     fn default() -> Self {
         Self {
-            // Not yet `Geometry` by default: the samplers miss more of the finer objects
-            // (decision 105).
-            objects: ObjectParts::File,
+            // Objects far larger than a cell are cut (decision 124); the file's objects are kept
+            // where they are already small.
+            objects: ObjectParts::Geometry,
             page_size: 4096,
             fanout: None,
             tree: TreeAlgorithm::Str,
