@@ -364,18 +364,18 @@ fn build_visibility(
     if v.sampling.sampler().casts_rays() {
         backend = WithRays::wrap(backend, scene)?;
     }
-    let shape =
-        TreeShape {
-            object_leaf: tree.object_leaves(),
-            node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
-            part_neighbours: crate::scene::parts::part_neighbours(scene),
-        };
+    let bounds = scene.all_object_bounds();
+    let shape = TreeShape {
+        object_leaf: tree.object_leaves(),
+        node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
+        part_neighbours: crate::scene::parts::part_neighbours(scene, &bounds),
+    };
     let options = PrecomputeOptions::of(v);
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(
         backend.as_mut(),
         grid,
-        &scene.all_object_bounds(),
+        &bounds,
         &shape,
         &options,
         v.shard(),

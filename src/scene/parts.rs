@@ -117,12 +117,11 @@ fn submesh(mesh: &Mesh, set: &[u32]) -> Mesh {
     out
 }
 
-/// For each object of `scene`, the other parts of its file object whose world boxes, grown by a
-/// thousandth of the larger one's extent, meet its own: where a cut surface goes on. Empty for
-/// an object that was not cut. The parts of an object are consecutive, numbered from 0
-/// ([`split_large_objects`]). O(parts²) per cut object.
-pub fn part_neighbours(scene: &Scene) -> Vec<Vec<u32>> {
-    let bounds = scene.all_object_bounds();
+/// For each object of `scene` (world boxes `bounds`, [`Scene::all_object_bounds`]), the other
+/// parts of its file object whose boxes, grown by a thousandth of the larger one's extent, meet
+/// its own: where a cut surface goes on. Empty for an object that was not cut. The parts of an
+/// object are consecutive, numbered from 0 ([`split_large_objects`]). O(parts²) per cut object.
+pub fn part_neighbours(scene: &Scene, bounds: &[Aabb]) -> Vec<Vec<u32>> {
     let mut out = vec![Vec::new(); scene.objects.len()];
     let mut start = 0;
     while start < scene.objects.len() {
@@ -213,9 +212,9 @@ mod tests {
             &[("floor", 0, Mat4::IDENTITY), ("box", 1, Mat4::IDENTITY), ("other", 0, far)],
         );
         let split = split_large_objects(&scene, 4.0);
-        let neighbours = part_neighbours(&split);
-        assert_eq!(neighbours.len(), split.objects.len());
         let bounds = split.all_object_bounds();
+        let neighbours = part_neighbours(&split, &bounds);
+        assert_eq!(neighbours.len(), split.objects.len());
         for (i, o) in split.objects.iter().enumerate() {
             let mine = &neighbours[i];
             if o.part.is_none() {

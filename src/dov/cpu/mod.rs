@@ -195,6 +195,18 @@ impl CpuBackend {
     pub fn set_packets(&mut self, on: bool) {
         self.packets = on;
     }
+
+    /// The first hit of each ray (origin, direction with its largest component ±1, bound) by
+    /// the fast path, compiled for this CPU's instructions: each ray bounded first by the
+    /// previous one's nearest triangle.
+    fn first_hits_scaled(&self, rays: &[(Vec3A, Vec3A, f32)]) -> Vec<u32> {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+            return unsafe { self.first_hits_wide(rays) };
+        }
+        self.first_hits_fast::<false>(rays)
+    }
 }
 
 impl DovBackend for CpuBackend {
@@ -264,12 +276,7 @@ impl RayCaster for CpuBackend {
     /// By the fast path, each ray bounded first by the previous one's nearest triangle.
     fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
         let rays: Vec<(Vec3A, Vec3A, f32)> = rays.iter().map(|&(o, d)| texel_scaled(o, d, reach)).collect();
-        #[cfg(target_arch = "x86_64")]
-        if self.wide {
-            // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
-            return unsafe { self.first_hits_wide(&rays) };
-        }
-        self.first_hits_fast::<false>(&rays)
+        self.first_hits_scaled(&rays)
     }
 
     /// Sorted by direction (cube face, then Morton order on it), so that rays side by side go
@@ -287,17 +294,12 @@ impl RayCaster for CpuBackend {
         order.sort_by_cached_key(|&i| direction_order(scaled[i as usize].0));
         let sorted: Vec<(Vec3A, f32)> = order.iter().map(|&i| scaled[i as usize]).collect();
         let o = Vec3A::from(origin);
-        #[cfg(target_arch = "x86_64")]
-        let traced = if self.wide && self.packets {
+        let traced = match () {
             // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
-            unsafe { self.first_hits_from_packets(o, &sorted) }
-        } else {
-            let sorted: Vec<(Vec3A, Vec3A, f32)> = sorted.iter().map(|&(d, bound)| (o, d, bound)).collect();
-            // SAFETY: as above.
-            if self.wide { unsafe { self.first_hits_wide(&sorted) } } else { self.first_hits_fast::<false>(&sorted) }
+            #[cfg(target_arch = "x86_64")]
+            () if self.wide && self.packets => unsafe { self.first_hits_from_packets(o, &sorted) },
+            () => self.first_hits_scaled(&sorted.iter().map(|&(d, bound)| (o, d, bound)).collect::<Vec<_>>()),
         };
-        #[cfg(not(target_arch = "x86_64"))]
-        let traced = self.first_hits_fast::<false>(&sorted.iter().map(|&(d, bound)| (o, d, bound)).collect::<Vec<_>>());
         let mut ids = vec![NO_OBJECT; rays.len()];
         for (&i, id) in order.iter().zip(traced) {
             ids[i as usize] = id;
