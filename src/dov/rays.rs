@@ -19,8 +19,9 @@ pub trait RayCaster: Sync {
     fn first_hit(&self, origin: Vec3, dir: Vec3, reach: f32) -> u32;
 
     /// [`RayCaster::first_hit`] of each ray (origin, direction) within `reach`, in turn. A
-    /// caster may carry what one ray met to the next, so rays in a coherent order (nearby
-    /// directions one after another) can be faster; the ids are the same.
+    /// caster may carry what one ray met to the next, or trace runs of nearly parallel rays
+    /// together, so rays in a coherent order (nearby directions one after another) can be
+    /// faster; the ids are the same.
     fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
         rays.iter().map(|&(o, d)| self.first_hit(o, d, reach)).collect()
     }

@@ -273,9 +273,16 @@ impl RayCaster for CpuBackend {
         })
     }
 
-    /// By the fast path, each ray bounded first by the previous one's nearest triangle.
+    /// Runs of nearly parallel rays in packets, each lane from its own origin, where the CPU has
+    /// AVX2 ([`CpuBackend::set_packets`]); else by the fast path, each ray bounded first by the
+    /// previous one's nearest triangle.
     fn first_hits(&self, rays: &[(Vec3, Vec3)], reach: f32) -> Vec<u32> {
         let rays: Vec<(Vec3A, Vec3A, f32)> = rays.iter().map(|&(o, d)| texel_scaled(o, d, reach)).collect();
+        #[cfg(target_arch = "x86_64")]
+        if self.wide && self.packets {
+            // SAFETY: the CPU has the features (checked at run time by `wide_instructions`).
+            return unsafe { self.first_hits_packets(&rays) };
+        }
         self.first_hits_scaled(&rays)
     }
 
@@ -498,26 +505,34 @@ mod tests {
             }
         }
 
-        /// A batch of rays (region and probe rays' route) gets each ray's own first hit within
-        /// the reach, also where each ray is bounded by the previous one's nearest triangle: rays
-        /// near each other in origin and direction, as they are traced, with a far one between.
+        /// A batch of rays (region rays' route) gets each ray's own first hit within the reach,
+        /// by packets and without, also where each ray is bounded by the previous one's nearest
+        /// triangle: parallel rays from origins spread around (a region ray bundle), rays near
+        /// each other in origin and direction, and a far one between.
         #[test]
         fn first_hits_are_first_hit_ray_by_ray(
             base in (vec3a(), vec3a()),
-            offsets in prop::collection::vec((vec3a(), vec3a()), 1..48),
+            offsets in prop::collection::vec((vec3a(), vec3a()), 1..80),
         ) {
             let scene = boxes();
-            let cpu = CpuBackend::new(&scene, 8).unwrap();
+            let mut cpu = CpuBackend::new(&scene, 8).unwrap();
             let rays: Vec<(Vec3, Vec3)> = offsets
                 .iter()
                 .enumerate()
-                .map(|(k, (o, d))| if k % 7 == 3 { (*o, *d) } else { (base.0 + 0.05 * *o, base.1 + 0.05 * *d) })
+                .map(|(k, (o, d))| match k % 40 {
+                    0..=31 => (base.0 + *o, base.1 + 0.001 * *d),
+                    32 => (*o, *d),
+                    _ => (base.0 + 0.05 * *o, base.1 + 0.05 * *d),
+                })
                 .map(|(o, d)| (o.into(), d.into()))
                 .filter(|(_, d): &(Vec3, Vec3)| d.abs().max_element() > 0.0)
                 .collect();
             for reach in [f32::INFINITY, 1.0, 6.0] {
                 let one_by_one: Vec<u32> = rays.iter().map(|&(o, d)| cpu.first_hit(o, d, reach)).collect();
-                prop_assert_eq!(cpu.first_hits(&rays, reach), one_by_one);
+                for packets in [true, false] {
+                    cpu.set_packets(packets);
+                    prop_assert_eq!(cpu.first_hits(&rays, reach), one_by_one.clone());
+                }
             }
         }
 

@@ -1,6 +1,8 @@
 //! Packet tracing for the AVX2 build of `render_ids`: the 32 rays of one block of 4 × 8 texels,
 //! which share their origin, go through each BVH together, one AVX2 lane per ray (four registers
-//! of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63, 100).
+//! of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63, 100). Rays
+//! may also start each from its own point ([`LaneOrigins`]: parallel region rays from across a
+//! cell).
 //!
 //! A node is fetched and its children's quantised bounds converted once for all the rays, and
 //! the stack holds one entry per node for all of them. One test of the eight children for the
@@ -33,10 +35,97 @@ const HALVES: usize = LANES / 8;
 pub(super) type Lanes = [__m256; HALVES];
 const _: () = assert!(LANES.is_multiple_of(8) && LANES <= 32 && (PACKET_COLS == 4 || PACKET_COLS == 8));
 
-/// [`LANES`] rays from one origin in one BVH's space, lane by lane.
+/// Where a packet's rays start: one point for every lane ([`Vec3A`]: a cube map's texels, a
+/// probe point's rays) or a point per lane ([`LaneOrigins`]: a bundle of parallel region rays
+/// from across a cell). The tests branch on [`Origins::PER_LANE`], a constant, so a shared
+/// origin costs what it did before packets could have several.
+pub(super) trait Origins: Copy {
+    const PER_LANE: bool;
+    /// The one origin (only called where `!PER_LANE`).
+    fn shared(&self) -> Vec3A;
+    /// Each lane's origin by axis (only called where `PER_LANE`).
+    fn lanes(&self) -> &[Lanes; 3];
+    /// The origins of these lanes (only called where `PER_LANE`).
+    fn of_lanes(o: [Lanes; 3]) -> Self;
+    /// This one origin (only called where `!PER_LANE`).
+    fn of_shared(o: Vec3A) -> Self;
+    /// The least and the greatest origin of a group of lanes, by axis: nothing for one origin.
+    type Range: Copy;
+    /// The range from its ends (only called where `PER_LANE`).
+    fn range(lo: [f32; 3], hi: [f32; 3]) -> Self::Range;
+    /// The ends of a range (only called where `PER_LANE`).
+    fn ends(range: &Self::Range) -> ([f32; 3], [f32; 3]);
+}
+
+impl Origins for Vec3A {
+    const PER_LANE: bool = false;
+    #[inline(always)]
+    fn shared(&self) -> Vec3A {
+        *self
+    }
+    fn lanes(&self) -> &[Lanes; 3] {
+        unreachable!("a shared origin has no lanes")
+    }
+    fn of_lanes(_: [Lanes; 3]) -> Self {
+        unreachable!("a shared origin has no lanes")
+    }
+    #[inline(always)]
+    fn of_shared(o: Vec3A) -> Self {
+        o
+    }
+    type Range = ();
+    fn range(_: [f32; 3], _: [f32; 3]) {}
+    fn ends(_: &()) -> ([f32; 3], [f32; 3]) {
+        unreachable!("a shared origin has no range")
+    }
+}
+
+/// Each lane's own origin, by axis.
 #[derive(Clone, Copy)]
-pub(super) struct Packet {
-    pub origin: Vec3A,
+pub(super) struct LaneOrigins([Lanes; 3]);
+
+impl LaneOrigins {
+    /// The origins `o[l]` of lanes `l`.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn new(o: &[Vec3A; LANES]) -> Self {
+        let axis = |a: usize| load(&std::array::from_fn(|l| o[l][a]));
+        Self([axis(0), axis(1), axis(2)])
+    }
+}
+
+impl Origins for LaneOrigins {
+    const PER_LANE: bool = true;
+    fn shared(&self) -> Vec3A {
+        unreachable!("lanes have their own origins")
+    }
+    #[inline(always)]
+    fn lanes(&self) -> &[Lanes; 3] {
+        &self.0
+    }
+    #[inline(always)]
+    fn of_lanes(o: [Lanes; 3]) -> Self {
+        Self(o)
+    }
+    fn of_shared(_: Vec3A) -> Self {
+        unreachable!("lanes have their own origins")
+    }
+    type Range = ([f32; 3], [f32; 3]);
+    #[inline(always)]
+    fn range(lo: [f32; 3], hi: [f32; 3]) -> Self::Range {
+        (lo, hi)
+    }
+    #[inline(always)]
+    fn ends(range: &Self::Range) -> ([f32; 3], [f32; 3]) {
+        *range
+    }
+}
+
+/// [`LANES`] rays in one BVH's space, lane by lane, from one origin or each from its own
+/// ([`Origins`]).
+#[derive(Clone, Copy)]
+pub(super) struct Packet<O: Origins = Vec3A> {
+    pub origin: O,
     /// Each lane's direction by axis.
     dir: [Lanes; 3],
     /// obvhs's `Ray::inv_direction` of each lane.
@@ -59,30 +148,6 @@ impl Packet {
             }
         }
         Self::along([load(&d[0]), load(&d[1]), load(&d[2])], origin, lanes)
-    }
-
-    /// The packet of the rays from `origin` along `dir` (by axis; lanes outside `lanes` are
-    /// ignored).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub fn along(dir: [Lanes; 3], origin: Vec3A, lanes: u32) -> Self {
-        // Loops, not `array::map`: the closure `map` calls cannot be inlined into it (it lacks
-        // the caller's AVX2), and the call per element cost the packet tracer about a tenth.
-        // Each field made whole in registers and written once: a `u32` built up by four-byte
-        // read-modify-writes stalled the copy of the packet that read it back.
-        let mut p = Self { origin, dir, inv: [splat(0.0); 3], lanes, negative: [0; 3] };
-        for (axis, d) in dir.iter().enumerate() {
-            let mut negative = 0;
-            for (h, &d) in d.iter().enumerate() {
-                // obvhs's `Ray::inv_direction`, eight lanes at a time (was a scalar division each).
-                p.inv[axis][h] = safe_inverse(d);
-                // `d < 0.0`, ordered: false for −0.0 (and NaN), as obvhs's octant.
-                let below = _mm256_cmp_ps::<_CMP_LT_OQ>(d, _mm256_setzero_ps());
-                negative |= (_mm256_movemask_ps(below) as u32) << (8 * h);
-            }
-            p.negative[axis] = negative;
-        }
-        p
     }
 
     /// The packet of the texel rays from `origin` through `(u, v)` of face `b`, lane by lane:
@@ -124,9 +189,36 @@ impl Packet {
         }
         (lanes_u, lanes_v)
     }
+}
+
+impl<O: Origins> Packet<O> {
+    /// The packet of the rays from `origin` (one, or one per lane) along `dir` (by axis; lanes
+    /// outside `lanes` are ignored).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn along(dir: [Lanes; 3], origin: O, lanes: u32) -> Self {
+        // Loops, not `array::map`: the closure `map` calls cannot be inlined into it (it lacks
+        // the caller's AVX2), and the call per element cost the packet tracer about a tenth.
+        // Each field made whole in registers and written once: a `u32` built up by four-byte
+        // read-modify-writes stalled the copy of the packet that read it back.
+        let mut p = Self { origin, dir, inv: [splat(0.0); 3], lanes, negative: [0; 3] };
+        for (axis, d) in dir.iter().enumerate() {
+            let mut negative = 0;
+            for (h, &d) in d.iter().enumerate() {
+                // obvhs's `Ray::inv_direction`, eight lanes at a time (was a scalar division each).
+                p.inv[axis][h] = safe_inverse(d);
+                // `d < 0.0`, ordered: false for −0.0 (and NaN), as obvhs's octant.
+                let below = _mm256_cmp_ps::<_CMP_LT_OQ>(d, _mm256_setzero_ps());
+                negative |= (_mm256_movemask_ps(below) as u32) << (8 * h);
+            }
+            p.negative[axis] = negative;
+        }
+        p
+    }
 
     /// This packet carried by `m` (world → model space), lane by lane as glam's
-    /// `Affine3A::transform_vector3a` carries one direction (`(x·d.x + y·d.y) + z·d.z`).
+    /// `Affine3A::transform_vector3a` carries one direction (`(x·d.x + y·d.y) + z·d.z`) and
+    /// `transform_point3a` one origin.
     #[target_feature(enable = "avx2")]
     #[inline]
     pub fn transformed(&self, m: &Affine3A) -> Self {
@@ -138,7 +230,34 @@ impl Packet {
                 *d = _mm256_add_ps(_mm256_add_ps(term(0), term(1)), term(2));
             }
         }
-        Self::along(dir, m.transform_point3a(self.origin), self.lanes)
+        let origin = if O::PER_LANE {
+            // `Affine3A::transform_point3a` lane by lane: `((x·o.x + y·o.y) + z·o.z) + t`.
+            let o = self.origin.lanes();
+            let mut moved = [splat(0.0); 3];
+            for (axis, moved) in moved.iter_mut().enumerate() {
+                for (h, moved) in moved.iter_mut().enumerate() {
+                    let term = |k: usize| _mm256_mul_ps(_mm256_set1_ps(cols[k][axis]), o[k][h]);
+                    let sum = _mm256_add_ps(_mm256_add_ps(term(0), term(1)), term(2));
+                    *moved = _mm256_add_ps(sum, _mm256_set1_ps(m.translation[axis]));
+                }
+            }
+            O::of_lanes(moved)
+        } else {
+            O::of_shared(m.transform_point3a(self.origin.shared()))
+        };
+        Self::along(dir, origin, self.lanes)
+    }
+
+    /// Lane `l`'s origin.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub fn origin_of(&self, l: usize) -> Vec3A {
+        if O::PER_LANE {
+            let axis = |a: usize| store(self.origin.lanes()[a])[l];
+            Vec3A::new(axis(0), axis(1), axis(2))
+        } else {
+            self.origin.shared()
+        }
     }
 
     /// Lane `l`'s direction.
@@ -270,28 +389,40 @@ pub(super) fn splat(v: f32) -> Lanes {
 /// (among `lanes`), each lane's `t`, and the lanes that see its back.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(super) fn intersect_triangle(
+pub(super) fn intersect_triangle<O: Origins>(
     tri: &RayTriangle,
-    p: &Packet,
+    p: &Packet<O>,
     tmin: f32,
     tmax: Lanes,
     lanes: u32,
 ) -> (u32, Lanes, u32) {
-    let c = tri.v0 - p.origin;
-    let n_dot_c = tri.n.dot(c);
+    // c = v0 − origin, and n · c: once for a shared origin, lane by lane for lanes' own.
+    let (c, n_dot_c) = if O::PER_LANE {
+        (Vec3A::ZERO, 0.0)
+    } else {
+        let c = tri.v0 - p.origin.shared();
+        (c, tri.n.dot(c))
+    };
     let (mut hits, mut back, mut ts) = (0, 0, [_mm256_setzero_ps(); HALVES]);
     for h in 0..HALVES {
         let [dx, dy, dz] = [p.dir[0][h], p.dir[1][h], p.dir[2][h]];
-        let (cx, cy, cz) = (_mm256_set1_ps(c.x), _mm256_set1_ps(c.y), _mm256_set1_ps(c.z));
         let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
-        // r = d × c (glam's order: x = d.y·c.z − d.z·c.y, …).
-        let rx = sub(mul(dy, cz), mul(dz, cy));
-        let ry = sub(mul(dz, cx), mul(dx, cz));
-        let rz = sub(mul(dx, cy), mul(dy, cx));
         // a · b = (a.x·b.x + a.y·b.y) + a.z·b.z, glam's order.
         let dot = |x, y, z, v: Vec3A| {
             add(add(mul(x, _mm256_set1_ps(v.x)), mul(y, _mm256_set1_ps(v.y))), mul(z, _mm256_set1_ps(v.z)))
         };
+        let (cx, cy, cz, n_dot_c) = if O::PER_LANE {
+            let o = p.origin.lanes();
+            let axis = |a: usize| sub(_mm256_set1_ps(tri.v0[a]), o[a][h]);
+            let (cx, cy, cz) = (axis(0), axis(1), axis(2));
+            (cx, cy, cz, dot(cx, cy, cz, tri.n))
+        } else {
+            (_mm256_set1_ps(c.x), _mm256_set1_ps(c.y), _mm256_set1_ps(c.z), _mm256_set1_ps(n_dot_c))
+        };
+        // r = d × c (glam's order: x = d.y·c.z − d.z·c.y, …).
+        let rx = sub(mul(dy, cz), mul(dz, cy));
+        let ry = sub(mul(dz, cx), mul(dx, cz));
+        let rz = sub(mul(dx, cy), mul(dy, cx));
         let n_dot_d = dot(dx, dy, dz, tri.n);
         let inv_det = _mm256_div_ps(_mm256_set1_ps(1.0), n_dot_d);
         let u = mul(dot(rx, ry, rz, tri.e2), inv_det);
@@ -299,7 +430,7 @@ pub(super) fn intersect_triangle(
         let w = sub(sub(_mm256_set1_ps(1.0), u), v);
         let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
         let det_nonzero = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
-        let t = mul(_mm256_set1_ps(n_dot_c), inv_det);
+        let t = mul(n_dot_c, inv_det);
         let in_range = _mm256_and_ps(
             _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)),
             _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax[h]),
@@ -312,31 +443,38 @@ pub(super) fn intersect_triangle(
     (hits & lanes, ts, back)
 }
 
-/// The range of one octant group's inverse directions on each axis: the least and the greatest
-/// over its lanes.
+/// The range of one octant group's inverse directions on each axis, and of its origins where
+/// each lane has its own: the least and the greatest over its lanes.
 #[derive(Clone, Copy)]
-struct InverseRange {
+struct GroupRange<O: Origins> {
     lo: [f32; 3],
     hi: [f32; 3],
+    origins: O::Range,
 }
 
-impl InverseRange {
+impl<O: Origins> GroupRange<O> {
     /// The range over the lanes `lanes` of `p` (not empty).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn of(p: &Packet, lanes: u32) -> Self {
-        let (mut lo, mut hi) = ([0f32; 3], [0f32; 3]);
+    fn of(p: &Packet<O>, lanes: u32) -> Self {
         let used = lane_mask(lanes);
         let (inf, neg_inf) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(f32::NEG_INFINITY));
-        for axis in 0..3 {
+        let range = |v: &Lanes| {
             let (mut min, mut max) = (inf, neg_inf);
-            for (inv, used) in p.inv[axis].iter().zip(&used) {
-                min = _mm256_min_ps(min, _mm256_blendv_ps(inf, *inv, *used));
-                max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, *inv, *used));
+            for (v, used) in v.iter().zip(&used) {
+                min = _mm256_min_ps(min, _mm256_blendv_ps(inf, *v, *used));
+                max = _mm256_max_ps(max, _mm256_blendv_ps(neg_inf, *v, *used));
             }
-            (lo[axis], hi[axis]) = (horizontal_min(min), horizontal_max(max));
+            (horizontal_min(min), horizontal_max(max))
+        };
+        let (mut lo, mut hi, mut origin_lo, mut origin_hi) = ([0f32; 3], [0f32; 3], [0f32; 3], [0f32; 3]);
+        for axis in 0..3 {
+            (lo[axis], hi[axis]) = range(&p.inv[axis]);
+            if O::PER_LANE {
+                (origin_lo[axis], origin_hi[axis]) = range(&p.origin.lanes()[axis]);
+            }
         }
-        Self { lo, hi }
+        Self { lo, hi, origins: O::range(origin_lo, origin_hi) }
     }
 }
 
@@ -367,20 +505,31 @@ fn horizontal_max(v: __m256) -> f32 {
 /// distance `q·(e·inv) + (p − origin)·inv` is a chain of rounded products and sums, and rounding
 /// is monotone, so with `q ≥ 0` and `e ≥ 0` it lies between the same chain at the range's ends
 /// (for `p − origin < 0` with the ends swapped); max and min are exact, so a lane's entry and
-/// exit lie inside the group's, and a child the group test rules out no lane enters.
+/// exit lie inside the group's, and a child the group test rules out no lane enters. Where each
+/// lane has its own origin, `p − origin` lies between `p` less the group's greatest and least
+/// origin, and its product with `inv` between the least and the greatest of the four products
+/// of the two ranges' ends (a product is monotone in each factor, and so is its rounding).
 #[target_feature(enable = "avx2")]
 #[inline]
-fn enter_children(
+fn enter_children<O: Origins>(
     node: &CwBvhNode,
-    p: &Packet,
+    p: &Packet<O>,
     oct: u32,
-    range: &InverseRange,
+    range: &GroupRange<O>,
     tmax: Lanes,
     lanes: u32,
     entered: &mut [u32; 8],
 ) -> u32 {
     let e = node.compute_extent();
-    let o = Vec3A::from(node.p) - p.origin;
+    // p − origin: the one origin's, or (per lane) the least and the greatest.
+    let (o_least, o_most) = if O::PER_LANE {
+        let (lo, hi) = O::ends(&range.origins);
+        let p = Vec3A::from(node.p);
+        (p - Vec3A::from(hi), p - Vec3A::from(lo))
+    } else {
+        let o = Vec3A::from(node.p) - p.origin.shared();
+        (o, o)
+    };
     // SAFETY: reads the 8 bytes of `b`.
     let q = |b: &[u8; 8]| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(b.as_ptr().cast()) }));
     let mut near = [[0f32; 8]; 3];
@@ -403,7 +552,13 @@ fn enter_children(
             _mm256_storeu_ps(far[axis].as_mut_ptr(), f);
         }
         let (inv_lo, inv_hi) = (range.lo[axis], range.hi[axis]);
-        let (o_lo, o_hi) = if o[axis] >= 0.0 { (o[axis] * inv_lo, o[axis] * inv_hi) } else { (o[axis] * inv_hi, o[axis] * inv_lo) };
+        let (o_lo, o_hi) = if O::PER_LANE {
+            let ends = [o_least[axis] * inv_lo, o_least[axis] * inv_hi, o_most[axis] * inv_lo, o_most[axis] * inv_hi];
+            (ends.into_iter().fold(f32::INFINITY, f32::min), ends.into_iter().fold(f32::NEG_INFINITY, f32::max))
+        } else {
+            let o = o_least[axis];
+            if o >= 0.0 { (o * inv_lo, o * inv_hi) } else { (o * inv_hi, o * inv_lo) }
+        };
         let plane = |q, inv: f32, o: f32| _mm256_add_ps(_mm256_mul_ps(q, _mm256_set1_ps(e[axis] * inv)), _mm256_set1_ps(o));
         group_t0 = _mm256_max_ps(group_t0, plane(n, inv_lo, o_lo));
         group_t1 = _mm256_min_ps(group_t1, plane(f, inv_hi, o_hi));
@@ -424,7 +579,12 @@ fn enter_children(
         let mut adj_origin = [_mm256_setzero_ps(); 3];
         for axis in 0..3 {
             adj_dir[axis] = _mm256_mul_ps(_mm256_set1_ps(e[axis]), p.inv[axis][h]);
-            adj_origin[axis] = _mm256_mul_ps(_mm256_set1_ps(o[axis]), p.inv[axis][h]);
+            let o = if O::PER_LANE {
+                _mm256_sub_ps(_mm256_set1_ps(node.p[axis]), p.origin.lanes()[axis][h])
+            } else {
+                _mm256_set1_ps(o_least[axis])
+            };
+            adj_origin[axis] = _mm256_mul_ps(o, p.inv[axis][h]);
         }
         let plane = |q: f32, axis: usize| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(q), adj_dir[axis]), adj_origin[axis]);
         let mut left = maybe;
@@ -483,9 +643,9 @@ pub(super) trait LaneBounds {
 /// `bvh.primitive_indices`). `stack` is scratch space.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(super) fn traverse<B: LaneBounds>(
+pub(super) fn traverse<O: Origins, B: LaneBounds>(
     bvh: &CwBvh,
-    p: &Packet,
+    p: &Packet<O>,
     lanes: u32,
     stack: &mut Vec<(u32, u32)>,
     bounds: &mut B,
@@ -495,7 +655,7 @@ pub(super) fn traverse<B: LaneBounds>(
     while left != 0 {
         let (oct, group) = p.octant_group(left);
         left &= !group;
-        let range = InverseRange::of(p, group);
+        let range = GroupRange::of(p, group);
         let mut entered = [0u32; 8];
         stack.clear();
         stack.push((0, group));
@@ -587,15 +747,59 @@ mod tests {
         }
     }
 
+    /// `dirs` by axis in registers.
+    #[target_feature(enable = "avx2")]
+    fn direction_lanes(dirs: &[Vec3A; LANES]) -> [Lanes; 3] {
+        let axis = |a: usize| load(&std::array::from_fn(|l| dirs[l][a]));
+        [axis(0), axis(1), axis(2)]
+    }
+
+    /// At every node of `bvh`, each lane of `p` (from `origins`, along `dirs`, up to `tmax`)
+    /// enters the children obvhs's own box test lets its ray enter.
+    fn check_box_test<O: Origins>(
+        bvh: &CwBvh,
+        p: &Packet<O>,
+        origins: &[Vec3A; LANES],
+        dirs: &[Vec3A; LANES],
+        tmax: &[f32; LANES],
+    ) -> Result<(), TestCaseError> {
+        for node in &bvh.nodes {
+            let mut left = p.lanes;
+            while left != 0 {
+                let (oct, group) = p.octant_group(left);
+                left &= !group;
+                let mut entered = [0; 8];
+                // SAFETY: the callers checked that AVX2 is present.
+                let slots = unsafe {
+                    let range = GroupRange::of(p, group);
+                    enter_children(node, p, oct, &range, load(tmax), group, &mut entered)
+                };
+                let nonzero = (0..8).fold(0, |m, slot| m | u32::from(entered[slot] != 0) << slot);
+                prop_assert_eq!(slots, nonzero, "entered slots");
+                for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
+                    let ray = Ray::new(origins[l], dirs[l], 0.0, tmax[l]);
+                    let oct_inv4 = bvh.new_traversal(dirs[l]).oct_inv4;
+                    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+                    let lane_mask = (0..8)
+                        .filter(|&slot| entered[slot] & (1 << l) != 0)
+                        .fold(0, |m, slot| m | extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot));
+                    prop_assert_eq!(lane_mask, node.intersect_ray(&ray, oct_inv4), "lane {}", l);
+                }
+            }
+        }
+        Ok(())
+    }
+
     proptest! {
         /// Every lane enters the children obvhs's own box test lets its ray enter, whatever the
-        /// packet's other lanes: the hit mask rebuilt from the lanes' per-child masks is
+        /// packet's other lanes, from one origin or each from its own: the hit mask rebuilt from the lanes' per-child masks is
         /// `CwBvhNode::intersect_ray`'s, at every node of a random BVH.
         #[test]
         fn lane_box_test_is_obvhs_box_test(
             tris in prop::collection::vec([vec3a(), vec3a(), vec3a()], 1..60),
             origin in vec3a(),
             (dirs, tmax, lanes) in lanes(),
+            spread in prop::option::of(prop::array::uniform32(vec3a())),
         ) {
             if !super::super::wide_instructions() {
                 eprintln!("skipped: no AVX2");
@@ -603,30 +807,15 @@ mod tests {
             }
             let tris: Vec<Triangle> = tris.iter().map(|v| Triangle { v0: v[0], v1: v[1], v2: v[2] }).collect();
             let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-            // SAFETY: AVX2 is present (checked above).
-            let p = unsafe { Packet::new(origin, &dirs, lanes) };
-            for node in &bvh.nodes {
-                let mut left = lanes;
-                while left != 0 {
-                    let (oct, group) = p.octant_group(left);
-                    left &= !group;
-                    let mut entered = [0; 8];
+            match spread {
+                // SAFETY: AVX2 is present (checked above).
+                None => check_box_test(&bvh, &unsafe { Packet::new(origin, &dirs, lanes) }, &[origin; LANES], &dirs, &tmax)?,
+                Some(spread) => {
+                    // Each lane from its own origin, about the first.
+                    let origins: [Vec3A; LANES] = std::array::from_fn(|l| origin + spread[l]);
                     // SAFETY: as above.
-                    let slots = unsafe {
-                        let range = InverseRange::of(&p, group);
-                        enter_children(node, &p, oct, &range, load(&tmax), group, &mut entered)
-                    };
-                    let nonzero = (0..8).fold(0, |m, slot| m | u32::from(entered[slot] != 0) << slot);
-                    prop_assert_eq!(slots, nonzero, "entered slots");
-                    for l in (0..LANES).filter(|l| group & (1 << l) != 0) {
-                        let ray = Ray::new(origin, dirs[l], 0.0, tmax[l]);
-                        let oct_inv4 = bvh.new_traversal(dirs[l]).oct_inv4;
-                        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-                        let lane_mask = (0..8)
-                            .filter(|&slot| entered[slot] & (1 << l) != 0)
-                            .fold(0, |m, slot| m | extract_byte64(child_bits8, slot) << extract_byte64(bit_index8, slot));
-                        prop_assert_eq!(lane_mask, node.intersect_ray(&ray, oct_inv4), "lane {}", l);
-                    }
+                    let p = unsafe { Packet::along(direction_lanes(&dirs), LaneOrigins::new(&origins), lanes) };
+                    check_box_test(&bvh, &p, &origins, &dirs, &tmax)?;
                 }
             }
         }
@@ -669,27 +858,62 @@ mod tests {
         /// `seen_from_behind` for its ray.
         #[test]
         fn lane_triangle_test_is_ray_triangle_test(
-            v in [vec3a(), vec3a(), vec3a()], origin in vec3a(), (dirs, tmax, lanes) in lanes(), tmin in 0.0f32..0.5,
+            v in [vec3a(), vec3a(), vec3a()],
+            origin in vec3a(),
+            (dirs, tmax, lanes) in lanes(),
+            tmin in 0.0f32..0.5,
+            spread in prop::option::of(prop::array::uniform32(vec3a())),
         ) {
             if !super::super::wide_instructions() {
                 eprintln!("skipped: no AVX2");
                 return Ok(());
             }
             let tri = RayTriangle::new(&Triangle { v0: v[0], v1: v[1], v2: v[2] });
+            let origins: [Vec3A; LANES] = std::array::from_fn(|l| origin + spread.map_or(Vec3A::ZERO, |s| s[l]));
             // SAFETY: AVX2 is present (checked above).
             let (hits, t, back) = unsafe {
-                let p = Packet::new(origin, &dirs, lanes);
-                let (hits, t, back) = intersect_triangle(&tri, &p, tmin, load(&tmax), lanes);
+                let (hits, t, back) = match spread {
+                    None => intersect_triangle(&tri, &Packet::new(origin, &dirs, lanes), tmin, load(&tmax), lanes),
+                    Some(_) => {
+                        let p = Packet::along(direction_lanes(&dirs), LaneOrigins::new(&origins), lanes);
+                        intersect_triangle(&tri, &p, tmin, load(&tmax), lanes)
+                    }
+                };
                 (hits, store(t), back)
             };
             for l in (0..LANES).filter(|l| lanes & (1 << l) != 0) {
-                let ray = Ray::new(origin, dirs[l], tmin, tmax[l]);
+                let ray = Ray::new(origins[l], dirs[l], tmin, tmax[l]);
                 let expected = tri.intersect(&ray);
                 prop_assert_eq!(hits & (1 << l) != 0, expected.is_finite(), "lane {}", l);
                 if expected.is_finite() {
                     prop_assert_eq!(t[l].to_bits(), expected.to_bits(), "lane {}", l);
                 }
                 prop_assert_eq!(back & (1 << l) != 0, tri.seen_from_behind(dirs[l]), "lane {}", l);
+            }
+        }
+
+        /// Carried by a transform, each lane's own origin is `Affine3A::transform_point3a`'s, bit
+        /// for bit (the single-ray path's origin in an instance's space).
+        #[test]
+        fn carried_lane_origins_are_the_single_rays_origins(
+            origins in prop::array::uniform32(vec3a()),
+            (dirs, _, lanes) in lanes(),
+            cols in [vec3a(), vec3a(), vec3a(), vec3a()],
+        ) {
+            if !super::super::wide_instructions() {
+                eprintln!("skipped: no AVX2");
+                return Ok(());
+            }
+            let m = Affine3A::from_cols(cols[0], cols[1], cols[2], cols[3]);
+            for l in 0..LANES {
+                // SAFETY: AVX2 is present (checked above).
+                let (got, moved) = unsafe {
+                    let p = Packet::along(direction_lanes(&dirs), LaneOrigins::new(&origins), lanes);
+                    (p.origin_of(l), p.transformed(&m).origin_of(l))
+                };
+                prop_assert_eq!(got.to_array().map(f32::to_bits), origins[l].to_array().map(f32::to_bits), "lane {}", l);
+                let expected = m.transform_point3a(origins[l]).to_array().map(f32::to_bits);
+                prop_assert_eq!(moved.to_array().map(f32::to_bits), expected, "lane {}", l);
             }
         }
     }

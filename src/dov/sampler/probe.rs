@@ -287,8 +287,10 @@ pub fn probe_cell(
 /// from inside a closed mesh meets its back faces first and finds nothing.
 ///
 /// The rays are traced sorted by direction (the texels of a 16² cube map), so that one ray
-/// after another meets the same walls and the caster's last hit bounds the next; which ray met
-/// an object first is still its place in the sequence, so the order changes no result.
+/// after another meets the same walls and the caster's last hit bounds the next, or a run of
+/// them goes through the scene together (the CPU backend: one packet, each lane from its own
+/// origin); which ray met an object first is still its place in the sequence, so the order
+/// changes no result.
 pub fn region_finds(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSequence) -> Vec<(u32, Vec3)> {
     region_rays_met(caster, cell, sequence).into_iter().map(|(id, (origin, _), _)| (id, origin)).collect()
 }
