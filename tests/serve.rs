@@ -356,6 +356,16 @@ fn bad_and_hostile_requests_get_their_status_and_the_server_keeps_answering() {
     assert!(out.contains("stopped"), "{out}");
 }
 
+/// The tiny city built in `dir`, opened and served, and the centre of its middle cell.
+fn served_tiny_city(dir: &Path) -> (Database, Server, glam::Vec3) {
+    let db_dir = tiny_city(dir);
+    let db = Database::open(&db_dir).unwrap();
+    let server = Server::start(&db_dir, &[]);
+    let grid = db.grid().unwrap();
+    let centre = grid.cell_centres()[grid.cell_id([grid.dims[0] / 2, 0, grid.dims[2] / 2])];
+    (db, server, centre)
+}
+
 /// The renderer's background, which the viewer clears to as well.
 const SKY: [u8; 3] = hdov::render::BACKGROUND;
 
@@ -368,11 +378,7 @@ const SKY: [u8; 3] = hdov::render::BACKGROUND;
 fn the_viewer_draws_the_answer_in_a_real_browser() {
     let Some(chromium) = hdov_testkit::browser::chromium_or_skip() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    let db_dir = tiny_city(tmp.path());
-    let db = Database::open(&db_dir).unwrap();
-    let server = Server::start(&db_dir, &[]);
-    let grid = db.grid().unwrap();
-    let c = grid.cell_centres()[grid.cell_id([grid.dims[0] / 2, 0, grid.dims[2] / 2])];
+    let (db, server, c) = served_tiny_city(tmp.path());
     let look = glam::Vec3::new(1.0, -0.05, 0.3);
     let answer = db.query(c, &QueryParams::default()).unwrap();
     let page = |extra: &str| {
@@ -496,4 +502,27 @@ fn the_tiles_plugin_never_requests_what_the_cell_cannot_see() {
     }
     assert!(hidden > 0, "no viewpoint had a hidden tile in view");
     assert!(fewer >= 2, "the plugin saves requests at {fewer} of 3 viewpoints");
+}
+
+/// The viewer draws through the plugin: `/?draw=tiles` (what its "draw" menu does) hands the walk,
+/// where it stands, to the 3D Tiles page with hdov's plugin, which finds the cell the library
+/// locates and draws tiles there; the 3D Tiles page offers the way back, and `draw=tiles-alone`
+/// draws without the plugin.
+#[test]
+fn the_viewer_hands_its_walk_to_the_tiles_plugin() {
+    let Some(chromium) = hdov_testkit::browser::chromium_or_skip() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let (db, server, at) = served_tiny_city(tmp.path());
+    let (_, id) = db.locate(at).unwrap();
+    for (how, plugin) in [("tiles", true), ("tiles-alone", false)] {
+        let url = format!("http://{}/?draw={how}&frames=timer&at={},{},{}&look=1,0,0.3", server.addr, at.x, at.y, at.z);
+        let dom = hdov_testkit::browser::browse(chromium, "--dump-dom", &url, [800, 600], 120_000);
+        let result = hdov_testkit::browser::page_result(&dom).unwrap_or_else(|e| panic!("{url}: {e}"));
+        assert_eq!(result["plugin"], plugin, "{how}");
+        assert!(result["steps"][0]["requests"].as_u64().unwrap() > 0, "{how}: nothing loaded");
+        if plugin {
+            assert_eq!(result["steps"][0]["cell"], id, "the plugin's cell");
+        }
+        assert!(dom.contains("<option value=\"query\">"), "{how}: no way back to the viewer's answers");
+    }
 }

@@ -156,6 +156,7 @@ fn router(served: Arc<Served>, concurrency: usize, timeout: Duration) -> Router 
             get(|| asset("text/plain; charset=utf-8", include_bytes!("viewer/three-LICENSE.txt"))),
         )
         .route("/stage.js", get(|| asset("text/javascript", include_bytes!("viewer/stage.js"))))
+        .route("/controls.js", get(|| asset("text/javascript", include_bytes!("viewer/controls.js"))))
         .route("/tiles.html", get(|| asset("text/html; charset=utf-8", include_bytes!("viewer/tiles.html"))))
         .route("/tiles.js", get(|| asset("text/javascript", include_bytes!("viewer/tiles.js"))))
         .route("/hdov-tiles-plugin.js", get(|| asset("text/javascript", include_bytes!("viewer/hdov-tiles-plugin.js"))))

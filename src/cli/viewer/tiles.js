@@ -8,15 +8,18 @@
 // at full detail — every tile in the frustum refined to geometric error 0 — and give each
 // frame's PSNR against it; referenceEvery=K: every K-th view only), nodes=query (the plugin draws
 // a node's internal level only where the query stops, as `hdov query` does, and refines every
-// other node), hud=0 (no overlay).
+// other node), hud=0 (no overlay and no controls).
 //
 // Each view is held until nothing is queued, downloading or parsing for three frames. At the end
 // the page writes its measures as JSON into #result and sets `data-state="done"` on <body>:
 // per view the cell, the requests and bytes so far (tiles and, with the plugin, its visibility
-// files apart) and the PSNR; and `requested`, every URL the tiles renderer fetched.
+// files apart) and the PSNR; and `requested`, every URL the tiles renderer fetched. Then, unless
+// it followed a walk or draws on a timer (a headless measurement), the page is the viewer's 3D
+// Tiles mode: walk on with the viewer's keys and mouse, or hand the walk back to the viewer.
 
 import * as THREE from 'three';
 import { TilesRenderer } from '/3d-tiles-renderer.min.js';
+import { drawMenu, pageAt, walker } from '/controls.js';
 import { HdovVisibilityPlugin } from '/hdov-tiles-plugin.js';
 import { stage } from '/stage.js';
 
@@ -29,7 +32,10 @@ if (params.get('frames') === 'timer') {
 }
 const overlay = document.getElementById('overlay');
 const errorLine = document.getElementById('error');
-if (params.get('hud') === '0') overlay.hidden = true;
+if (params.get('hud') === '0') {
+  overlay.hidden = true;
+  document.getElementById('controls').hidden = true;
+}
 const fail = (m) => {
   errorLine.textContent = String(m);
   document.body.dataset.state = 'failed';
@@ -39,6 +45,7 @@ addEventListener('unhandledrejection', (e) => fail(e.reason?.message ?? e.reason
 
 const vec3 = (s) => s.split(',').map(Number);
 const withPlugin = params.get('plugin') !== '0';
+const drawSelect = drawMenu(withPlugin ? 'tiles' : 'tiles-alone');
 
 // --- the picture: as the viewer draws it, one pixel per pixel for stable PSNRs ---------------
 const { renderer, scene, camera } = stage({ antialias: false, pixelRatio: 1 });
@@ -179,3 +186,29 @@ document.getElementById('result').textContent = JSON.stringify({
   requested: counts.urls,
 });
 if (document.body.dataset.state !== 'failed') document.body.dataset.state = 'done';
+
+// --- the viewer's 3D Tiles mode: walking on from the last view ---------------------------------
+if (!params.has('walk') && params.get('frames') !== 'timer') {
+  const info = await (await fetch('/info')).json();
+  const [x0, , z0, x1, , z1] = info.grid.region;
+  const [nx, , nz] = info.grid.dims;
+  const controls = walker(camera, renderer.domElement, Math.min((x1 - x0) / nx, (z1 - z0) / nz) * 0.5);
+  controls.lookAlong(views.at(-1).look);
+  drawSelect.addEventListener('change', () => {
+    const page = drawSelect.value === 'query' ? '/' : '/tiles.html';
+    const extra = drawSelect.value === 'query' ? {} : { plugin: drawSelect.value === 'tiles' ? '1' : '0' };
+    location.href = pageAt(page, camera, controls.look(), extra);
+  });
+  let last = performance.now();
+  const walkOn = (now) => {
+    controls.update(Math.min(0.1, (now - last) / 1000));
+    last = now;
+    camera.updateMatrixWorld();
+    tiles.update();
+    renderer.render(scene, camera);
+    overlay.textContent = `plugin   ${withPlugin ? `on, cell ${plugin.cell ?? '–'}` : 'off'}\n` +
+      `tiles    ${tiles.stats.visible} drawn\nrequests ${counts.requests}\nMB       ${(counts.bytes / 1e6).toFixed(2)}`;
+    requestAnimationFrame(walkOn);
+  };
+  requestAnimationFrame(walkOn);
+}

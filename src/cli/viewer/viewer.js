@@ -9,8 +9,13 @@
 // URL parameters: at=X,Y,Z and look=DX,DY,DZ (a fixed start), walk=straight|turning|back-and-forth
 // and steps=N (follow a recorded walk), colour=shading|dov|lod, hud=0 (no overlay: a clean
 // picture), eta, mode, lod_rule (passed to /query).
+//
+// "draw" (the menu, or draw=tiles|tiles-alone in the URL) hands the walk, where it stands, to the
+// 3D Tiles page (/tiles.html): the same database as a tileset in 3DTilesRendererJS, with hdov's
+// visibility plugin or without it (frames=timer is passed on, for a headless browser).
 
 import * as THREE from 'three';
+import { drawMenu, pageAt, walker } from '/controls.js';
 import { stage } from '/stage.js';
 
 const params = new URLSearchParams(location.search);
@@ -58,13 +63,18 @@ addEventListener('resize', () => {
 
 const start = params.has('at') ? vec3(params.get('at')) : [(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2];
 camera.position.set(...start);
-let yaw = 0;
-let pitch = 0;
-function lookAlong(d) {
-  yaw = Math.atan2(-d[0], -d[2]);
-  pitch = Math.atan2(d[1], Math.hypot(d[0], d[2]));
+const controls = walker(camera, renderer.domElement, Math.min(cellSize[0], cellSize[2]) * 0.5);
+controls.lookAlong(params.has('look') ? vec3(params.get('look')) : [1, 0, 0]);
+/** Hands the walk to the 3D Tiles page, with the plugin (`tiles`) or without (`tiles-alone`). */
+function drawTiles(how) {
+  const extra = { plugin: how === 'tiles' ? '1' : '0' };
+  if (params.has('frames')) extra.frames = params.get('frames');
+  location.replace(pageAt('/tiles.html', camera, controls.look(), extra));
 }
-lookAlong(params.has('look') ? vec3(params.get('look')) : [1, 0, 0]);
+drawMenu('query').addEventListener('change', (e) => {
+  if (e.target.value !== 'query') drawTiles(e.target.value);
+});
+if (['tiles', 'tiles-alone'].includes(params.get('draw'))) drawTiles(params.get('draw'));
 
 // --- meshes: one stored LOD record per URL --------------------------------------------------
 const geometries = new Map(); // url -> Promise<BufferGeometry>
@@ -197,20 +207,7 @@ fullBox.addEventListener('change', () => {
   }).catch((e) => { errorLine.textContent = String(e.message ?? e); });
 });
 
-// --- moving: keyboard and mouse, or a recorded walk -------------------------------------------
-const keys = new Set();
-addEventListener('keydown', (e) => keys.add(e.key.toLowerCase()));
-addEventListener('keyup', (e) => keys.delete(e.key.toLowerCase()));
-let dragging = null;
-renderer.domElement.addEventListener('pointerdown', (e) => { dragging = [e.clientX, e.clientY]; });
-addEventListener('pointerup', () => { dragging = null; });
-addEventListener('pointermove', (e) => {
-  if (!dragging) return;
-  yaw -= (e.clientX - dragging[0]) * 0.004;
-  pitch = Math.max(-1.5, Math.min(1.5, pitch - (e.clientY - dragging[1]) * 0.004));
-  dragging = [e.clientX, e.clientY];
-});
-
+// --- moving: keyboard and mouse (controls.js), or a recorded walk ----------------------------
 let walk = null;
 let walkStep = 0;
 if (params.has('walk')) {
@@ -225,8 +222,7 @@ async function runWalk() {
   while (walkStep < walk.steps.length) {
     const s = walk.steps[walkStep++];
     camera.position.set(...s.at);
-    lookAlong(s.look);
-    camera.rotation.set(pitch, yaw, 0, 'YXZ');
+    controls.lookAlong(s.look);
     onMove();
     await pending;
     redraw();
@@ -235,19 +231,6 @@ async function runWalk() {
   status = `walk done, ${walk.steps.length} steps`;
   redraw();
   document.body.dataset.walk = 'done';
-}
-
-const speed = Math.min(cellSize[0], cellSize[2]) * 0.5; // metres per second
-function move(dt) {
-  const forward = new THREE.Vector3(-Math.sin(yaw), 0, -Math.cos(yaw));
-  const right = new THREE.Vector3(-forward.z, 0, forward.x);
-  const step = speed * dt * (keys.has('shift') ? 4 : 1);
-  if (keys.has('w') || keys.has('arrowup')) camera.position.addScaledVector(forward, step);
-  if (keys.has('s') || keys.has('arrowdown')) camera.position.addScaledVector(forward, -step);
-  if (keys.has('d') || keys.has('arrowright')) camera.position.addScaledVector(right, step);
-  if (keys.has('a') || keys.has('arrowleft')) camera.position.addScaledVector(right, -step);
-  if (keys.has('r')) camera.position.y += step;
-  if (keys.has('f')) camera.position.y -= step;
 }
 
 // --- the frame loop and the overlay -----------------------------------------------------------
@@ -274,8 +257,7 @@ function frame(now) {
   frameMs = frameMs * 0.9 + (now - last) * 0.1;
   last = now;
   if (!walk) {
-    move(dt);
-    camera.rotation.set(pitch, yaw, 0, 'YXZ');
+    controls.update(dt);
     onMove();
   }
   redraw();
