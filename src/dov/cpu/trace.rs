@@ -544,10 +544,10 @@ impl CpuBackend {
 
     /// The first hit of each ray (origin, direction with its largest component ±1, the hits up
     /// to its bound along it): each run of rays that point within [`RUN_CONE_COS`] of the run's
-    /// first, up to [`packet::LANES`], in one packet, each lane from its own origin (a
-    /// bundle of parallel region rays from across a cell); a run shorter than
-    /// [`PACKET_MIN_LANES`] one ray after another. Callers give rays in a coherent order. Equals
-    /// a plain traversal's ids within each bound.
+    /// first, up to [`packet::LANES`], in one packet, each lane from its own origin (region rays
+    /// of nearby directions from all over a cell); a run shorter than [`PACKET_MIN_LANES`] one
+    /// ray after another. Callers give rays in a coherent order. Equals a plain traversal's ids
+    /// within each bound.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     pub(super) unsafe fn first_hits_packets(&self, rays: &[(Vec3A, Vec3A, f32)]) -> Vec<u32> {
@@ -636,7 +636,8 @@ impl CpuBackend {
                 window.clear();
                 window.bound = reach[l];
                 // SAFETY: AVX2 and the rest of `wide_instructions` are present (the callers are
-                // `trace_band_wide` and `first_hits_from_packets`, compiled with them).
+                // `trace_band_wide`, `first_hits_from_packets` and `first_hits_packets`, compiled
+                // with them).
                 unsafe { self.traverse_all_wide(p.origin_of(l), p.direction(l), window) };
             }
             let Some(h) = window.winner() else { continue };
