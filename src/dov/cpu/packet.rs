@@ -1,8 +1,8 @@
 //! Packet tracing for the AVX2 build of `render_ids`: the 32 rays of one block of 4 × 8 texels,
 //! which share their origin, go through each BVH together, one AVX2 lane per ray (four registers
 //! of eight) (docs/dov.md, "Per-ray speed against Embree"; docs/decisions.md, 60–63, 100). Rays
-//! may also start each from its own point ([`LaneOrigins`]: parallel region rays from across a
-//! cell).
+//! may also start each from its own point ([`LaneOrigins`]: region rays of nearby directions
+//! from all over a cell).
 //!
 //! A node is fetched and its children's quantised bounds converted once for all the rays, and
 //! the stack holds one entry per node for all of them. One test of the eight children for the
@@ -36,9 +36,10 @@ pub(super) type Lanes = [__m256; HALVES];
 const _: () = assert!(LANES.is_multiple_of(8) && LANES <= 32 && (PACKET_COLS == 4 || PACKET_COLS == 8));
 
 /// Where a packet's rays start: one point for every lane ([`Vec3A`]: a cube map's texels, a
-/// probe point's rays) or a point per lane ([`LaneOrigins`]: a bundle of parallel region rays
-/// from across a cell). The tests branch on [`Origins::PER_LANE`], a constant, so a shared
-/// origin costs what it did before packets could have several.
+/// probe point's rays) or a point per lane ([`LaneOrigins`]: region rays of nearby directions
+/// from all over a cell). The tests branch on [`Origins::PER_LANE`], a constant, so a shared
+/// origin costs about what it did before packets could have several (0.85 % more instructions
+/// on the engine's cube maps: docs/decisions.md, 125).
 pub(super) trait Origins: Copy {
     const PER_LANE: bool;
     /// The one origin (only called where `!PER_LANE`).
