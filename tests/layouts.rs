@@ -31,11 +31,7 @@ fn fixture() -> Fixture {
     hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
     // The same measurement, independently: the tree is deterministic, so are its V-pages.
     let tree = RTree::build(&scene.all_object_bounds(), hdov::format::tree_page::fanout(512), params.tree);
-    let shape = TreeShape {
-        object_leaf: tree.object_leaves(),
-        node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
-        ..Default::default()
-    };
+    let shape = TreeShape::of(&tree);
     let mut backend = hdov::dov::CpuBackend::new(&scene, RESOLUTION).unwrap();
     let grid = scene.grid.clone().unwrap();
     let dov = precompute_shard(

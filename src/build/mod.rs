@@ -365,11 +365,7 @@ fn build_visibility(
         backend = WithRays::wrap(backend, scene)?;
     }
     let bounds = scene.all_object_bounds();
-    let shape = TreeShape {
-        object_leaf: tree.object_leaves(),
-        node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
-        part_neighbours: crate::scene::parts::part_neighbours(scene, &bounds),
-    };
+    let shape = TreeShape { part_neighbours: crate::scene::parts::part_neighbours(scene, &bounds), ..TreeShape::of(tree) };
     let options = PrecomputeOptions::of(v);
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(

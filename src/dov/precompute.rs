@@ -42,6 +42,12 @@ pub struct TreeShape {
 }
 
 impl TreeShape {
+    /// The shape of `tree`: its objects' leaves and its nodes' parents, no parts' neighbours.
+    pub fn of(tree: &crate::rtree::RTree) -> Self {
+        let node_parent = tree.nodes.iter().map(|n| n.parent).collect();
+        Self { object_leaf: tree.object_leaves(), node_parent, part_neighbours: Vec::new() }
+    }
+
     /// Checks that every id is in range and every node reaches a root (no cycles). O(nodes·depth).
     pub fn check(&self, objects: usize) -> Result<()> {
         let nodes = self.node_parent.len();

@@ -41,11 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = hdov::city::generate(&CityParams { seed: 1, scale: CityScale::Default, ..Default::default() })?;
     let grid = scene.grid.clone().expect("the city brings a grid");
     let tree = RTree::build(&scene.all_object_bounds(), fanout(4096), TreeAlgorithm::Str);
-    let shape = TreeShape {
-        object_leaf: tree.object_leaves(),
-        node_parent: tree.nodes.iter().map(|n| n.parent).collect(),
-        ..Default::default()
-    };
+    let shape = TreeShape::of(&tree);
     let lods: Vec<_> = scene.meshes.iter().map(|m| leaf_chain(&m.mesh, &LodParams::default())).collect();
     let run = |b: &mut dyn DovBackend| -> hdov::Result<Vec<(u32, CellDov)>> {
         let opts = PrecomputeOptions::default();
