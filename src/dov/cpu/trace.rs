@@ -531,13 +531,7 @@ impl CpuBackend {
                 }
                 continue;
             }
-            let (mut dir, mut reach) = ([[0f32; LANES]; 3], [f32::INFINITY; LANES]);
-            for (l, &(d, bound)) in chunk.iter().enumerate() {
-                (dir[0][l], dir[1][l], dir[2][l], reach[l]) = (d.x, d.y, d.z, bound);
-            }
-            let lanes = packet::ALL_LANES >> (LANES - chunk.len());
-            let p = packet::Packet::along([packet::load(&dir[0]), packet::load(&dir[1]), packet::load(&dir[2])], o, lanes);
-            ids.extend_from_slice(&self.trace_packet(&p, packet::load(&reach), &mut state)[..chunk.len()]);
+            self.push_packet(o, chunk, &mut state, &mut ids);
         }
         ids
     }
@@ -569,16 +563,30 @@ impl CpuBackend {
                 }
                 continue;
             }
-            let (mut origins, mut dir, mut reach) = ([Vec3A::ZERO; LANES], [[0f32; LANES]; 3], [f32::INFINITY; LANES]);
+            let (mut origins, mut lane_rays) = ([Vec3A::ZERO; LANES], [(Vec3A::ZERO, 0.0); LANES]);
             for (l, &(o, d, bound)) in run.iter().enumerate() {
-                (origins[l], dir[0][l], dir[1][l], dir[2][l], reach[l]) = (o, d.x, d.y, d.z, bound);
+                (origins[l], lane_rays[l]) = (o, (d, bound));
             }
-            let lanes = packet::ALL_LANES >> (LANES - n);
-            let dir = [packet::load(&dir[0]), packet::load(&dir[1]), packet::load(&dir[2])];
-            let p = packet::Packet::along(dir, packet::LaneOrigins::new(&origins), lanes);
-            ids.extend_from_slice(&self.trace_packet(&p, packet::load(&reach), &mut state)[..n]);
+            self.push_packet(packet::LaneOrigins::new(&origins), &lane_rays[..n], &mut state, &mut ids);
         }
         ids
+    }
+
+    /// The rays of `run` (at most [`packet::LANES`]: direction with its largest component ±1,
+    /// and bound) from `origin` (one, or one per lane) as one packet: their first hits, in
+    /// order, onto `ids`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn push_packet<O: packet::Origins>(&self, origin: O, run: &[(Vec3A, f32)], state: &mut TexelState, ids: &mut Vec<u32>) {
+        use packet::LANES;
+        let (mut dir, mut reach) = ([[0f32; LANES]; 3], [f32::INFINITY; LANES]);
+        for (l, &(d, bound)) in run.iter().enumerate() {
+            (dir[0][l], dir[1][l], dir[2][l], reach[l]) = (d.x, d.y, d.z, bound);
+        }
+        let lanes = packet::ALL_LANES >> (LANES - run.len());
+        let p = packet::Packet::along([packet::load(&dir[0]), packet::load(&dir[1]), packet::load(&dir[2])], origin, lanes);
+        ids.extend_from_slice(&self.trace_packet(&p, packet::load(&reach), state)[..run.len()]);
     }
 
     /// [`CpuBackend::trace_fast`] for the lanes of a packet together, each lane among the hits
