@@ -158,12 +158,12 @@ impl VisibilityArgs {
         if self.no_visibility {
             return Ok(None);
         }
-        let default_floor = match self.samples {
-            Sampling::Probe(p) if p.region == 0 => "box",
-            _ => "box,neighbours,parts",
+        let zero_dov_floor = if self.zero_dov_floor.is_empty() {
+            FloorTest::default_for(&self.samples)
+        } else {
+            FloorTest::parse_list(self.zero_dov_floor.iter().map(String::as_str))
+                .map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?
         };
-        let given: Vec<&str> = self.zero_dov_floor.iter().map(String::as_str).collect();
-        let floor = if given.is_empty() { default_floor.split(',').collect() } else { given };
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
@@ -172,7 +172,7 @@ impl VisibilityArgs {
             dov_codec: self.dov_codec,
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
-            zero_dov_floor: FloorTest::parse_list(floor).map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?,
+            zero_dov_floor,
         }))
     }
 }

@@ -171,6 +171,16 @@ impl FloorTest {
     /// A build's floors unless it names its own: box, neighbours and parts.
     pub const DEFAULT: [FloorTest; 3] = [FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners, FloorTest::PartNeighbours];
 
+    /// The floors a build with `sampling` takes unless it names its own: [`FloorTest::DEFAULT`],
+    /// or the box alone for ray probing without region rays (its rays check what the neighbours
+    /// test would guess).
+    pub fn default_for(sampling: &Sampling) -> Vec<FloorTest> {
+        match sampling {
+            Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
+            _ => FloorTest::DEFAULT.to_vec(),
+        }
+    }
+
     /// The tests `names` name, as `--zero-dov-floor` lists them; `none` names no test.
     pub fn parse_list<'a>(names: impl IntoIterator<Item = &'a str>) -> std::result::Result<Vec<FloorTest>, String> {
         names.into_iter().filter(|n| *n != "none").map(str::parse).collect()

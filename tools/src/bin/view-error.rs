@@ -213,10 +213,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows: Vec<Row> = Vec::new();
     for (k, name) in samplers.iter().enumerate() {
         let sampling: Sampling = name.parse()?;
-        let floors = match sampling {
-            Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
-            _ => FloorTest::DEFAULT.to_vec(),
-        };
+        let floors = FloorTest::default_for(&sampling);
         let visibility = VisibilityParams {
             resolution: r,
             backend: BackendKind::Cpu,
