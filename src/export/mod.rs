@@ -148,13 +148,10 @@ fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
             extras["dov"] = json!(d);
         }
         // A part says so in its node's name too, for viewers that show names only.
-        let node_name = match i.part {
-            Some(k) => {
-                extras["part"] = json!(k);
-                format!("{} [part {k}]", i.name)
-            }
-            None => i.name.to_string(),
-        };
+        if let Some(k) = i.part {
+            extras["part"] = json!(k);
+        }
+        let node_name = crate::scene::parts::display_name(&i.name, i.part);
         let mut node = json!({ "name": node_name, "mesh": mesh, "extras": extras });
         let transform = db.item_transform(i);
         if transform != Mat4::IDENTITY {

@@ -50,7 +50,7 @@ pub fn split_large_objects(scene: &Scene, part_extent: f32) -> Scene {
         }
         let first = out.meshes.len() as u32;
         out.meshes.extend(
-            parts.into_iter().enumerate().map(|(k, mesh)| BaseMesh { name: format!("{} [part {k}]", base.name), mesh }),
+            parts.into_iter().enumerate().map(|(k, mesh)| BaseMesh { name: display_name(&base.name, Some(k as u32)), mesh }),
         );
         became.push((first..out.meshes.len() as u32).collect());
     }
@@ -115,6 +115,15 @@ fn submesh(mesh: &Mesh, set: &[u32]) -> Mesh {
         }
     }
     out
+}
+
+/// How people see a part named: `NAME [part K]` (answers' glTF nodes, part meshes, tools'
+/// reports); a whole object by its name alone.
+pub fn display_name(name: &str, part: Option<u32>) -> String {
+    match part {
+        Some(k) => format!("{name} [part {k}]"),
+        None => name.to_string(),
+    }
 }
 
 /// For each object of `scene` (world boxes `bounds`, [`Scene::all_object_bounds`]), the other

@@ -257,10 +257,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             row.excess = (row.excess.0 + e, row.excess.1 + n);
             let name = |o: u32| {
                 let object = &measured.objects[o as usize];
-                match object.part {
-                    Some(k) => format!("{} [part {k}]", object.name),
-                    None => object.name.clone(),
-                }
+                hdov::scene::parts::display_name(&object.name, object.part)
             };
             let mut named: Vec<(String, f64)> = wrong.iter().map(|&(o, w)| (name(o), w / v.seen)).collect();
             named.sort_by(|a, b| b.1.total_cmp(&a.1));
