@@ -4,9 +4,11 @@
 
 import * as THREE from 'three';
 
-/** First-person controls of `camera`, listening on `dom` (drags) and the window (keys), moving
- * `speed` scene units a second. */
-export function walker(camera, dom, speed) {
+/** First-person controls of `camera`, listening on `dom` (drags) and the window (keys), walking
+ * half a cell of `grid` (/info's) a second. */
+export function walker(camera, dom, grid) {
+  const [x0, , z0, x1, , z1] = grid.region;
+  const speed = Math.min((x1 - x0) / grid.dims[0], (z1 - z0) / grid.dims[2]) * 0.5;
   let yaw = 0;
   let pitch = 0;
   const keys = new Set();

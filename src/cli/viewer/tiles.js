@@ -190,9 +190,7 @@ if (document.body.dataset.state !== 'failed') document.body.dataset.state = 'don
 // --- the viewer's 3D Tiles mode: walking on from the last view ---------------------------------
 if (!params.has('walk') && params.get('frames') !== 'timer') {
   const info = await (await fetch('/info')).json();
-  const [x0, , z0, x1, , z1] = info.grid.region;
-  const [nx, , nz] = info.grid.dims;
-  const controls = walker(camera, renderer.domElement, Math.min((x1 - x0) / nx, (z1 - z0) / nz) * 0.5);
+  const controls = walker(camera, renderer.domElement, info.grid);
   controls.lookAlong(views.at(-1).look);
   drawSelect.addEventListener('change', () => {
     const page = drawSelect.value === 'query' ? '/' : '/tiles.html';

@@ -63,7 +63,7 @@ addEventListener('resize', () => {
 
 const start = params.has('at') ? vec3(params.get('at')) : [(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2];
 camera.position.set(...start);
-const controls = walker(camera, renderer.domElement, Math.min(cellSize[0], cellSize[2]) * 0.5);
+const controls = walker(camera, renderer.domElement, info.grid);
 controls.lookAlong(params.has('look') ? vec3(params.get('look')) : [1, 0, 0]);
 /** Hands the walk to the 3D Tiles page, with the plugin (`tiles`) or without (`tiles-alone`). */
 function drawTiles(how) {
