@@ -79,6 +79,8 @@ pub enum Param {
     Grid,
     /// An id cube handed to a DoV backend.
     IdCube,
+    /// The GPU backend's region views' texels per face edge.
+    RegionViews,
     /// Interior sample points per cell (and the samplers that add them).
     InteriorSamples,
     /// The V-page layout to read.
@@ -155,6 +157,7 @@ impl Param {
             Param::Grid => "grid",
             Param::IdCube => "id cube",
             Param::InteriorSamples => "interior_samples",
+            Param::RegionViews => "region_views",
             Param::Layout => "layout",
             Param::Layouts => "layouts",
             Param::LodDrawTolerance => "lod_draw_tolerance",

@@ -217,6 +217,8 @@ fn out_of_bounds_arguments_are_refused_before_any_work() {
         (&["--page-size", "50"], "--page-size"),
         (&["--page-size", "99999999"], "--page-size"),
         (&["--lod-draw-tolerance", "-1"], "--lod-draw-tolerance"),
+        (&["--region-views", "17", "--backend", "gpu"], "--region-views"),
+        (&["--region-views", "2", "--backend", "cpu"], "--region-views"),
         (&["--zero-dov-floor", "box:-2"], "--zero-dov-floor"),
         (&["--zero-dov-floor", "walls"], "--zero-dov-floor"),
         (&["--shard", "3/3"], "--shard"),

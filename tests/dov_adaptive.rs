@@ -4,8 +4,9 @@
 
 use glam::Vec3;
 use hdov::AdaptiveSampling;
-use hdov::dov::precompute::{PrecomputeOptions, Shard, TreeShape, precompute_shard};
-use hdov::dov::{CpuBackend, DovBackend};
+use hdov::dov::gpu::GpuOptions;
+use hdov::dov::precompute::{PrecomputeOptions, Shard, ShardDov, TreeShape, precompute_shard};
+use hdov::dov::{BackendKind, CpuBackend, DovBackend, WithRays, open_backend};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
 use hdov::{RayProbing, Sampling};
@@ -63,23 +64,30 @@ const DENSE: u32 = 64;
 const TOLERANCE_TEXELS: f64 = 8.0;
 
 /// Checks that every (cell, object) pair that dense sampling sees with a DoV ≥ `tolerance`
-/// centre texels, the sampler of `options` (no floor) sees too.
+/// centre texels (on the CPU backend, the reference), the sampler of `options` (no floor) sees
+/// too, measuring on the CPU backend, or with `gpu_region_views: Some(N)` on the GPU backend
+/// drawing region views of N² texels a face; returns what the sampler's shard did.
+#[allow(clippy::too_many_arguments)]
 fn finds_what_dense_sampling_finds(
+    gpu_region_views: Option<u32>,
     seed: u64,
     walls: usize,
     boxes: usize,
     options: &PrecomputeOptions,
     tolerance: f64,
     grid: &ViewGrid,
-) -> Result<(), TestCaseError> {
+) -> Result<ShardDov, TestCaseError> {
     let scene = walls_and_boxes(seed, walls, boxes);
     let bounds = scene.all_object_bounds();
     let shape = flat_shape(bounds.len());
-    let mut backend = CpuBackend::new(&scene, R).unwrap();
-    let texel = backend.cube_map().texel_floor();
-    let truth = dense_cells(&mut backend, grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
+    let mut reference = CpuBackend::new(&scene, R).unwrap();
+    let texel = reference.cube_map().texel_floor();
+    let truth = dense_cells(&mut reference, grid, &bounds, &shape, 0..grid.cell_count(), DENSE).unwrap();
+    let kind = if gpu_region_views.is_some() { BackendKind::Gpu } else { BackendKind::Cpu };
+    let gpu = GpuOptions { region_views: gpu_region_views.unwrap_or(0), ..Default::default() };
+    let mut backend = WithRays::wrap(open_backend(&scene, R, kind, &gpu).unwrap(), &scene).unwrap();
     let got =
-        precompute_shard(&mut backend, grid, &bounds, &shape, options, Shard::ALL, &hdov::progress::Quiet).unwrap();
+        precompute_shard(backend.as_mut(), grid, &bounds, &shape, options, Shard::ALL, &hdov::progress::Quiet).unwrap();
     for (t, (cell, g)) in truth.iter().zip(&got.cells) {
         for &(object, dov) in &t.objects {
             if f64::from(dov) >= tolerance * texel {
@@ -91,7 +99,7 @@ fn finds_what_dense_sampling_finds(
             }
         }
     }
-    Ok(())
+    Ok(got)
 }
 
 /// Ray probing is held to half the adaptive sampler's tolerance, on wider cells: there its
@@ -119,7 +127,7 @@ proptest! {
             zero_dov_tests: vec![],
             ..Default::default()
         };
-        finds_what_dense_sampling_finds(seed, walls, boxes, &options, TOLERANCE_TEXELS, &grid())?;
+        finds_what_dense_sampling_finds(None, seed, walls, boxes, &options, TOLERANCE_TEXELS, &grid())?;
     }
 
 }
@@ -142,8 +150,41 @@ proptest! {
     fn probing_finds_what_dense_sampling_finds(seed in any::<u64>(), walls in 1usize..5, boxes in 3usize..10) {
         let options =
             PrecomputeOptions { samplers: vec![Sampling::Probe(RayProbing::DEFAULT)], zero_dov_tests: vec![], ..Default::default() };
-        finds_what_dense_sampling_finds(seed, walls, boxes, &options, PROBE_TOLERANCE_TEXELS, &wide_grid())?;
+        finds_what_dense_sampling_finds(None, seed, walls, boxes, &options, PROBE_TOLERANCE_TEXELS, &wide_grid())?;
     }
+}
+
+/// Region sampling drawn by the GPU backend (region views, the default sampler's rays as small
+/// turned cube maps) finds what dense sampling finds, as the CPU backend's region rays do
+/// (`probing_finds_what_dense_sampling_finds`), on the same twelve scenes.
+#[test]
+fn gpu_region_views_find_what_dense_sampling_finds() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let options =
+        PrecomputeOptions { samplers: vec![Sampling::default()], zero_dov_tests: vec![], ..Default::default() };
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases: 12,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(1),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    });
+    runner
+        .run(&(any::<u64>(), 1usize..5, 3usize..10), |(seed, walls, boxes)| {
+            let got = finds_what_dense_sampling_finds(
+                Some(2),
+                seed,
+                walls,
+                boxes,
+                &options,
+                PROBE_TOLERANCE_TEXELS,
+                &wide_grid(),
+            )?;
+            prop_assert!(got.region_views > 0, "the GPU backend drew no region views");
+            Ok(())
+        })
+        .unwrap();
 }
 
 /// The adaptive points come on top of the corners: the build measures the corners of the cells
@@ -184,12 +225,12 @@ fn adaptive_misses_what_region_rays_find() {
     let (seed, walls, boxes) = (5226681018130421639, 4, 4);
     let region =
         PrecomputeOptions { samplers: vec![Sampling::default()], zero_dov_tests: vec![], ..Default::default() };
-    finds_what_dense_sampling_finds(seed, walls, boxes, &region, 1.0, &grid()).unwrap();
+    finds_what_dense_sampling_finds(None, seed, walls, boxes, &region, 1.0, &grid()).unwrap();
     let adaptive = PrecomputeOptions {
         samplers: vec![Sampling::Adaptive(AdaptiveSampling::new(2, 32).unwrap())],
         zero_dov_tests: vec![],
         ..Default::default()
     };
-    let missed = finds_what_dense_sampling_finds(seed, walls, boxes, &adaptive, TOLERANCE_TEXELS, &grid());
+    let missed = finds_what_dense_sampling_finds(None, seed, walls, boxes, &adaptive, TOLERANCE_TEXELS, &grid());
     assert!(missed.is_err(), "the adaptive sampler now finds it: say so in docs/dov.md and drop this contrast");
 }

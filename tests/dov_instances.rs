@@ -234,8 +234,13 @@ fn gpu_instances_draw_like_baked_world_meshes_texel_for_texel() {
     let mut full_detail_triangles = 0;
     for with_lods in [false, true] {
         let (lods, flat_lods) = if with_lods { (Some(&lods[..]), Some(&flat_lods[..])) } else { (None, None) };
-        let options =
-            |lods, direct_draws| GpuOptions { near: Some(near), lods, lod_tolerance_texels: tolerance, direct_draws };
+        let options = |lods, direct_draws| GpuOptions {
+            near: Some(near),
+            lods,
+            lod_tolerance_texels: tolerance,
+            direct_draws,
+            region_views: 0,
+        };
         let mut world = GpuBackend::with_options(&flat, r, &options(flat_lods, true)).unwrap();
         let mut indirect = GpuBackend::with_options(&scene, r, &options(lods, false)).unwrap();
         let mut direct = GpuBackend::with_options(&scene, r, &options(lods, true)).unwrap();

@@ -359,7 +359,12 @@ fn build_visibility(
     progress: &Progress,
 ) -> Result<VisibilityInfo> {
     let t = Instant::now();
-    let gpu = GpuOptions { lods: leaf_lods, lod_tolerance_texels: v.lod_draw_tolerance, ..Default::default() };
+    let gpu = GpuOptions {
+        lods: leaf_lods,
+        lod_tolerance_texels: v.lod_draw_tolerance,
+        region_views: v.region_views,
+        ..Default::default()
+    };
     let mut backend = open_backend(scene, v.resolution, v.backend, &gpu)?;
     if v.sampling.sampler().casts_rays() {
         backend = WithRays::wrap(backend, scene)?;

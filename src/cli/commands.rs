@@ -140,6 +140,12 @@ pub struct VisibilityArgs {
     /// object's DoV within 0.5 % + 2 texels of full detail (docs/dov.md); the CPU backend ignores it.
     #[arg(long, default_value_t = hdov::DEFAULT_LOD_TOLERANCE_TEXELS, allow_negative_numbers = true)]
     lod_draw_tolerance: f32,
+    /// GPU backend: draw region rays as small cube maps of N² texels a face from many origins
+    /// (N = 1: 6 rays an origin, as many origins as rays / 6) instead of casting them on the CPU;
+    /// 0 = cast them (the reference). Fewer texels a view means more origins: more accurate, more
+    /// draws (docs/dov.md, "Region views on the GPU").
+    #[arg(long, default_value_t = 0)]
+    region_views: u32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), parts (a part
     /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts;
@@ -172,6 +178,7 @@ impl VisibilityArgs {
             dov_codec: self.dov_codec,
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
+            region_views: self.region_views,
             zero_dov_floor,
         }))
     }

@@ -135,6 +135,7 @@ fn flag_of(param: Param) -> &'static str {
         Param::PageSize => "--page-size",
         Param::Path => "--path",
         Param::Region => "--region",
+        Param::RegionViews => "--region-views",
         Param::Render => "render",
         Param::Resolution => "--resolution",
         Param::ReviewBox => "--review-box",

@@ -31,6 +31,13 @@ pub struct FaceBasis {
     pub forward: Vec3,
 }
 
+impl FaceBasis {
+    /// The basis turned by the rotation `turn`.
+    pub fn turned(&self, turn: glam::Mat3) -> FaceBasis {
+        FaceBasis { right: turn * self.right, up: turn * self.up, forward: turn * self.forward }
+    }
+}
+
 /// The basis of face `face` (0..6). `right = forward × up`, i.e. the frame of a right-handed
 /// camera looking along `forward` (glam's `look_to_rh`), so the GPU's view matrix is a rotation.
 pub fn face_basis(face: usize) -> FaceBasis {

@@ -33,8 +33,9 @@ use glam::{Mat4, Vec3, Vec4};
 use wgpu::util::DrawIndexedIndirectArgs;
 
 use super::cpu::{check_cube, check_point, check_resolution_and_near};
-use super::cubemap::{FACE_COUNT, face_basis};
-use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube};
+use super::cubemap::{FACE_COUNT, FaceBasis, face_basis};
+use super::sampling::RegionViews;
+use super::{BACK_FACE_BIT, CubeMap, DovBackend, IdCube, NO_OBJECT};
 use crate::error::{Error, Param, Result};
 use crate::geom::{Aabb, max_scale};
 use crate::gfx::Gpu;
@@ -63,11 +64,20 @@ pub struct GpuOptions<'a> {
     /// Issue direct `draw_indexed` calls even where the device could take one indirect
     /// multi-draw per face: the same commands and pixels, for testing and timing the fallback.
     pub direct_draws: bool,
+    /// Draw region sampling as region views of this many texels a face edge
+    /// ([`DovBackend::region_views`]); 0: leave region rays to the CPU caster.
+    pub region_views: u32,
 }
 
 impl Default for GpuOptions<'_> {
     fn default() -> Self {
-        Self { near: None, lods: None, lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS, direct_draws: false }
+        Self {
+            near: None,
+            lods: None,
+            lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS,
+            direct_draws: false,
+            region_views: 0,
+        }
     }
 }
 
@@ -140,7 +150,12 @@ pub struct GpuBackend {
     gpu: Gpu,
     pipeline: wgpu::RenderPipeline,
     uniforms: wgpu::Buffer,
+    bind_layout: wgpu::BindGroupLayout,
     face_bind_groups: Vec<wgpu::BindGroup>,
+    /// Texels per face edge of region views; 0: none drawn.
+    region_resolution: u32,
+    /// Region views' targets, made at the first [`DovBackend::region_views`].
+    region: Option<RegionTargets>,
     /// Model-space positions, indices and instances; `None` for an empty scene.
     geometry: Option<GeometryBuffers>,
     /// Per base mesh, its levels finest first (only level 0 without LODs).
@@ -160,6 +175,25 @@ pub struct GpuBackend {
     depth_view: wgpu::TextureView,
     readback: wgpu::Buffer,
     padded_row_bytes: u32,
+}
+
+/// Texel rows of the atlas that region views are drawn into ([`DovBackend::region_views`]): one
+/// view a row of views, its six faces side by side; as many views a render pass as fill it.
+const REGION_ATLAS_ROWS: u32 = 512;
+
+/// The atlas that region views are drawn into (row `v` of views: view `v` of a batch, column
+/// `f` of faces: its face `f`), its depth buffer and read-back, and one uniform block and bind
+/// group per face of every view of a batch.
+struct RegionTargets {
+    atlas: wgpu::Texture,
+    atlas_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    readback: wgpu::Buffer,
+    padded_row_bytes: u32,
+    uniforms: wgpu::Buffer,
+    bind_groups: Vec<wgpu::BindGroup>,
+    /// A batch's draw commands, grown as needed; `None` with direct draws.
+    indirect: Option<wgpu::Buffer>,
 }
 
 struct GeometryBuffers {
@@ -192,6 +226,10 @@ impl GpuBackend {
         let tolerance = options.lod_tolerance_texels;
         if !(tolerance.is_finite() && tolerance >= 0.0) {
             return Err(Error::bad_param(Param::LodDrawTolerance, format!("{tolerance} must be finite and >= 0")));
+        }
+        let max = crate::format::params::MAX_REGION_VIEW_RESOLUTION;
+        if options.region_views > max {
+            return Err(Error::bad_param(Param::RegionViews, format!("{} texels is outside 0..={max}", options.region_views)));
         }
         if let Some(lods) = options.lods
             && lods.len() != scene.meshes.len()
@@ -251,22 +289,7 @@ impl GpuBackend {
             mapped_at_creation: false,
         });
         let bind_layout = crate::gfx::uniform_layout::<FaceUniform>(device, "dov face", wgpu::ShaderStages::VERTEX);
-        let face_bind_groups = (0..FACE_COUNT as u64)
-            .map(|f| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("dov face"),
-                    layout: &bind_layout,
-                    entries: &[wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &uniforms,
-                            offset: f * UNIFORM_STRIDE,
-                            size: wgpu::BufferSize::new(std::mem::size_of::<FaceUniform>() as u64),
-                        }),
-                    }],
-                })
-            })
-            .collect();
+        let face_bind_groups = face_bind_groups(device, &bind_layout, &uniforms, FACE_COUNT);
         let pipeline = create_pipeline(device, &bind_layout);
 
         let face_targets = (0..FACE_COUNT)
@@ -292,7 +315,10 @@ impl GpuBackend {
             gpu,
             pipeline,
             uniforms,
+            bind_layout,
             face_bind_groups,
+            region_resolution: options.region_views,
+            region: None,
             geometry,
             mesh_levels: model.levels,
             objects,
@@ -367,8 +393,7 @@ impl GpuBackend {
     /// levels in `chosen` (one per object in draw order), in draw order, consecutive instances of
     /// the same mesh level merged into one command. Conservative: a box is dropped only when it
     /// lies wholly outside one of the frustum's planes (or wholly nearer than the near plane).
-    fn face_commands(&self, face: usize, eye: Vec3, chosen: &[u32], out: &mut Vec<DrawIndexedIndirectArgs>) {
-        let b = face_basis(face);
+    fn face_commands(&self, b: FaceBasis, eye: Vec3, chosen: &[u32], out: &mut Vec<DrawIndexedIndirectArgs>) {
         // Inside the frustum: n·d ≥ 0 for each side normal, forward·d ≥ near.
         let sides = [b.forward - b.right, b.forward + b.right, b.forward - b.up, b.forward + b.up];
         let first = out.len();
@@ -409,6 +434,62 @@ impl GpuBackend {
             }
         }
     }
+}
+
+/// A render pass into the id target `ids`, cleared to [`NO_OBJECT`], with the reverse-Z depth
+/// buffer `depth` cleared to 0 (infinitely far).
+fn begin_id_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    ids: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: ids,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                // NO_OBJECT = u32::MAX, exactly representable in the f64 clear value.
+                load: wgpu::LoadOp::Clear(wgpu::Color { r: NO_OBJECT as f64, g: 0.0, b: 0.0, a: 0.0 }),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
+/// `count` bind groups of `layout`, group `k` over the uniform block at `k` strides of `uniforms`.
+fn face_bind_groups(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    uniforms: &wgpu::Buffer,
+    count: usize,
+) -> Vec<wgpu::BindGroup> {
+    (0..count as u64)
+        .map(|k| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("dov face"),
+                layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: uniforms,
+                        offset: k * UNIFORM_STRIDE,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<FaceUniform>() as u64),
+                    }),
+                }],
+            })
+        })
+        .collect()
 }
 
 /// Every base mesh's levels, model space, in one position and one index buffer.
@@ -551,8 +632,7 @@ fn create_pipeline(device: &wgpu::Device, bind_layout: &wgpu::BindGroupLayout) -
 /// The matrix taking `position − eye` to clip space for one face: x = right·d, y = up·d,
 /// z = near, w = forward·d. So NDC (x, y) is the cube map's (u, v) and depth is `near/forward·d`
 /// (reverse Z, 1 at the near plane, → 0 at infinity).
-fn clip_from_rel(face: usize, near: f32) -> Mat4 {
-    let b = face_basis(face);
+fn clip_from_rel(b: FaceBasis, near: f32) -> Mat4 {
     Mat4::from_cols(b.right.extend(0.0), b.up.extend(0.0), Vec4::new(0.0, 0.0, 0.0, near), b.forward.extend(0.0))
         .transpose()
 }
@@ -570,6 +650,14 @@ impl DovBackend for GpuBackend {
         &self.cube
     }
 
+    fn region_views(&mut self, cell: &crate::grid::ViewCell, rays: u32) -> Option<Result<(RegionViews, Vec<u32>)>> {
+        if self.region_resolution == 0 {
+            return None;
+        }
+        let views = RegionViews::new(cell, rays, self.region_resolution);
+        Some(self.draw_region_views(&views).map(|ids| (views, ids)))
+    }
+
     fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()> {
         check_point(p)?;
         let r = self.cube.resolution();
@@ -579,7 +667,7 @@ impl DovBackend for GpuBackend {
         let chosen = self.chosen_levels(eye);
         for face in 0..FACE_COUNT {
             let u = FaceUniform {
-                clip_from_rel: clip_from_rel(face, self.near).to_cols_array_2d(),
+                clip_from_rel: clip_from_rel(face_basis(face), self.near).to_cols_array_2d(),
                 eye: eye.extend(0.0).to_array(),
             };
             self.gpu.queue.write_buffer(&self.uniforms, face as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
@@ -588,7 +676,7 @@ impl DovBackend for GpuBackend {
         let mut commands = Vec::new();
         let mut starts = [0usize; FACE_COUNT + 1];
         for face in 0..FACE_COUNT {
-            self.face_commands(face, eye, &chosen, &mut commands);
+            self.face_commands(face_basis(face), eye, &chosen, &mut commands);
             starts[face + 1] = commands.len();
         }
         self.draw_commands += commands.len() as u64;
@@ -603,52 +691,9 @@ impl DovBackend for GpuBackend {
         let mut encoder =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
         for face in 0..FACE_COUNT {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("dov face"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.face_targets[face].1,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        // NO_OBJECT = u32::MAX, exactly representable in the f64 clear value.
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: u32::MAX as f64, g: 0.0, b: 0.0, a: 0.0 }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            let face_commands = &commands[starts[face]..starts[face + 1]];
-            let Some(geometry) = &self.geometry else { continue };
-            if face_commands.is_empty() {
-                continue;
-            }
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.face_bind_groups[face], &[]);
-            pass.set_vertex_buffer(0, geometry.positions.slice(..));
-            pass.set_vertex_buffer(1, geometry.instances.slice(..));
-            pass.set_index_buffer(geometry.indices.slice(..), wgpu::IndexFormat::Uint32);
-            match &self.indirect {
-                Some(indirect) => {
-                    let offset = (starts[face] * std::mem::size_of::<DrawIndexedIndirectArgs>()) as u64;
-                    pass.multi_draw_indexed_indirect(indirect, offset, face_commands.len() as u32);
-                }
-                None => {
-                    for c in face_commands {
-                        pass.draw_indexed(
-                            c.first_index..c.first_index + c.index_count,
-                            c.base_vertex,
-                            c.first_instance..c.first_instance + c.instance_count,
-                        );
-                    }
-                }
-            }
+            let mut pass = begin_id_pass(&mut encoder, "dov face", &self.face_targets[face].1, &self.depth_view);
+            let indirect = self.indirect.as_ref().map(|buffer| (buffer, starts[face]));
+            self.issue(&mut pass, &self.face_bind_groups[face], &commands[starts[face]..starts[face + 1]], indirect);
         }
         for (face, (texture, _)) in self.face_targets.iter().enumerate() {
             encoder.copy_texture_to_buffer(
@@ -678,6 +723,168 @@ impl DovBackend for GpuBackend {
 }
 
 impl GpuBackend {
+    /// Issues `commands` in `pass` with the face uniforms of `bind_group`: as one indirect
+    /// multi-draw of the commands that start at command `first` of `indirect` where given, else
+    /// as direct draws.
+    fn issue(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        bind_group: &wgpu::BindGroup,
+        commands: &[DrawIndexedIndirectArgs],
+        indirect: Option<(&wgpu::Buffer, usize)>,
+    ) {
+        let Some(geometry) = &self.geometry else { return };
+        if commands.is_empty() {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_vertex_buffer(0, geometry.positions.slice(..));
+        pass.set_vertex_buffer(1, geometry.instances.slice(..));
+        pass.set_index_buffer(geometry.indices.slice(..), wgpu::IndexFormat::Uint32);
+        match indirect {
+            Some((buffer, first)) => {
+                let offset = (first * std::mem::size_of::<DrawIndexedIndirectArgs>()) as u64;
+                pass.multi_draw_indexed_indirect(buffer, offset, commands.len() as u32);
+            }
+            None => {
+                for c in commands {
+                    pass.draw_indexed(
+                        c.first_index..c.first_index + c.index_count,
+                        c.base_vertex,
+                        c.first_instance..c.first_instance + c.instance_count,
+                    );
+                }
+            }
+        }
+    }
+
+    /// The region views' targets (see [`RegionTargets`]).
+    fn region_targets(&self) -> RegionTargets {
+        let r = self.region_resolution;
+        let (width, height) = (r * FACE_COUNT as u32, REGION_ATLAS_ROWS / r * r);
+        let atlas = self.gpu.target("dov region views", width, height, wgpu::TextureFormat::R32Uint);
+        let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
+        let depth = self.gpu.depth_buffer("dov region depth", width, height);
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+        let padded_row_bytes = crate::gfx::padded_row_bytes(width, 4);
+        let readback = self.gpu.readback_buffer("dov region readback", padded_row_bytes as u64 * height as u64);
+        let slots = (REGION_ATLAS_ROWS / r) as usize * FACE_COUNT;
+        let uniforms = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("dov region uniforms"),
+            size: UNIFORM_STRIDE * slots as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_groups = face_bind_groups(&self.gpu.device, &self.bind_layout, &uniforms, slots);
+        RegionTargets { atlas, atlas_view, depth_view, readback, padded_row_bytes, uniforms, bind_groups, indirect: None }
+    }
+
+    /// [`DovBackend::region_views`]: as many views a render pass as fill [`REGION_ATLAS_ROWS`],
+    /// each face into its square of the atlas (a viewport), objects culled per face by their
+    /// boxes as for a whole cube map, one copy and one blocking read-back a pass.
+    fn draw_region_views(&mut self, views: &RegionViews) -> Result<Vec<u32>> {
+        for &(origin, _) in views.views() {
+            check_point(origin)?;
+        }
+        let mut out = vec![NO_OBJECT; views.texel_count()];
+        if self.geometry.is_none() {
+            return Ok(out);
+        }
+        if self.region.is_none() {
+            self.region = Some(self.region_targets());
+        }
+        let r = self.region_resolution;
+        let batch_views = (REGION_ATLAS_ROWS / r) as usize;
+        let per_view = views.cube().texel_count();
+        for (batch, chunk) in views.views().chunks(batch_views).enumerate() {
+            let validation = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            // Each face of each view: its uniforms and draw commands; slot `s` = view · 6 + face.
+            let mut commands = Vec::new();
+            let mut starts = vec![0usize; chunk.len() * FACE_COUNT + 1];
+            for (v, &(origin, turn)) in chunk.iter().enumerate() {
+                let eye = origin - self.origin;
+                let chosen = self.chosen_levels(eye);
+                for face in 0..FACE_COUNT {
+                    let slot = v * FACE_COUNT + face;
+                    let basis = face_basis(face).turned(turn);
+                    let u = FaceUniform {
+                        clip_from_rel: clip_from_rel(basis, self.near).to_cols_array_2d(),
+                        eye: eye.extend(0.0).to_array(),
+                    };
+                    let region = self.region.as_ref().expect("made above");
+                    self.gpu.queue.write_buffer(&region.uniforms, slot as u64 * UNIFORM_STRIDE, bytemuck::bytes_of(&u));
+                    self.face_commands(basis, eye, &chosen, &mut commands);
+                    starts[slot + 1] = commands.len();
+                }
+            }
+            self.draw_commands += commands.len() as u64;
+            self.triangles_drawn +=
+                commands.iter().map(|c| u64::from(c.index_count / 3) * u64::from(c.instance_count)).sum::<u64>();
+            if self.indirect.is_some() && !commands.is_empty() {
+                let bytes: Vec<u8> = commands.iter().flat_map(|c| c.as_bytes().iter().copied()).collect();
+                let region = self.region.as_mut().expect("made above");
+                if region.indirect.as_ref().is_none_or(|b| b.size() < bytes.len() as u64) {
+                    region.indirect = Some(self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("dov region draw commands"),
+                        size: (bytes.len() as u64).next_power_of_two(),
+                        usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    }));
+                }
+                self.gpu.queue.write_buffer(region.indirect.as_ref().expect("made above"), 0, &bytes);
+            }
+            let region = self.region.as_ref().expect("made above");
+            let mut encoder =
+                self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov region") });
+            {
+                let mut pass = begin_id_pass(&mut encoder, "dov region views", &region.atlas_view, &region.depth_view);
+                for slot in 0..chunk.len() * FACE_COUNT {
+                    let (x, y) = ((slot % FACE_COUNT) as u32 * r, (slot / FACE_COUNT) as u32 * r);
+                    pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
+                    pass.set_scissor_rect(x, y, r, r);
+                    let indirect = region.indirect.as_ref().filter(|_| self.indirect.is_some()).map(|b| (b, starts[slot]));
+                    self.issue(&mut pass, &region.bind_groups[slot], &commands[starts[slot]..starts[slot + 1]], indirect);
+                }
+            }
+            let rows = chunk.len() as u32 * r;
+            encoder.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &region.atlas,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &region.readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(region.padded_row_bytes),
+                        rows_per_image: Some(rows),
+                    },
+                },
+                wgpu::Extent3d { width: r * FACE_COUNT as u32, height: rows, depth_or_array_layers: 1 },
+            );
+            self.gpu.queue.submit([encoder.finish()]);
+            if let Some(e) = pollster::block_on(validation.pop()) {
+                return Err(Error::Gpu(format!("{}: drawing region views: {e}", self.gpu.adapter_name)));
+            }
+            let first = batch * batch_views * per_view;
+            let (r, faces) = (r as usize, FACE_COUNT);
+            self.gpu.read_buffer(&region.readback, |data| {
+                for (y, row) in data.chunks_exact(region.padded_row_bytes as usize).take(rows as usize).enumerate() {
+                    let (v, texel_row) = (y / r, y % r);
+                    for (x, s) in row[..faces * r * 4].chunks_exact(4).enumerate() {
+                        let (face, col) = (x / r, x % r);
+                        out[first + v * per_view + face * r * r + texel_row * r + col] =
+                            u32::from_le_bytes([s[0], s[1], s[2], s[3]]);
+                    }
+                }
+            })?;
+        }
+        Ok(out)
+    }
+
     /// Maps the read-back buffer (blocking until the GPU is done) and strips the row padding.
     fn read_back(&self, out: &mut IdCube) -> Result<()> {
         let r = self.cube.resolution() as usize;

@@ -192,6 +192,16 @@ pub trait DovBackend {
     fn ray_caster(&self) -> Option<&dyn rays::RayCaster> {
         None
     }
+
+    /// Region sampling drawn rather than traced: `cell`'s region views of at least `rays`
+    /// texels ([`sampling::RegionViews`], at the backend's own resolution) and the ids they see,
+    /// view after view, each in [`IdCube`]'s texel order, with this backend's id rule. `None`
+    /// where the backend draws none (the CPU backend, the reference, casts the region rays one
+    /// by one, [`rays::RayCaster::first_hits`]; the GPU backend unless asked to,
+    /// [`gpu::GpuOptions::region_views`]).
+    fn region_views(&mut self, _cell: &crate::grid::ViewCell, _rays: u32) -> Option<Result<(sampling::RegionViews, Vec<u32>)>> {
+        None
+    }
 }
 
 /// A backend that measures with another and casts single rays ([`DovBackend::ray_caster`]) with a
@@ -231,6 +241,9 @@ impl DovBackend for WithRays {
     }
     fn ray_caster(&self) -> Option<&dyn rays::RayCaster> {
         Some(&self.rays)
+    }
+    fn region_views(&mut self, cell: &crate::grid::ViewCell, rays: u32) -> Option<Result<(sampling::RegionViews, Vec<u32>)>> {
+        self.measuring.region_views(cell, rays)
     }
 }
 

@@ -195,6 +195,8 @@ pub struct ShardDov {
     /// Rays cast by ray probing towards targets, and to measure footprints.
     pub probe_rays: u64,
     pub footprint_rays: u64,
+    /// Region views drawn instead of region rays cast (the GPU backend).
+    pub region_views: u64,
 }
 
 /// Computes the [`CellDov`] of every cell of `shard`.
@@ -308,6 +310,7 @@ pub fn precompute_shard(
     out.points_measured = tally.done();
     out.probe_rays = tally.probe_rays;
     out.footprint_rays = tally.footprint_rays;
+    out.region_views = tally.region_views;
     Ok(out)
 }
 

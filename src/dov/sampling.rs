@@ -5,7 +5,7 @@
 
 use std::collections::HashSet;
 
-use glam::Vec3;
+use glam::{Mat3, Quat, Vec3};
 
 use super::PointDov;
 use crate::grid::ViewCell;
@@ -39,18 +39,20 @@ pub struct RegionRays {
     shift: [f32; 5],
 }
 
+/// The seed of a cell's own samples, from its box's bits (and its places: the parts of one
+/// lattice cell draw different samples).
+fn cell_seed(cell: &ViewCell) -> u64 {
+    let b = cell.bounds;
+    let seed = b.min.to_array().iter().chain(&b.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
+        (h ^ u64::from(c.to_bits())).wrapping_mul(0xbf58_476d_1ce4_e5b9)
+    });
+    if cell.places == crate::grid::ALL_PLACES { seed } else { (seed ^ cell.places).wrapping_mul(0xbf58_476d_1ce4_e5b9) }
+}
+
 impl RegionRays {
     /// The rays of `cell`, their origins where its viewers stand ([`ViewCell::point`]).
     pub fn new(cell: &ViewCell) -> Self {
-        let b = cell.bounds;
-        let mut seed = b.min.to_array().iter().chain(&b.max.to_array()).fold(0x9e37_79b9_7f4a_7c15u64, |h, c| {
-            (h ^ u64::from(c.to_bits())).wrapping_mul(0xbf58_476d_1ce4_e5b9)
-        });
-        // The parts of one lattice cell cast different rays.
-        if cell.places != crate::grid::ALL_PLACES {
-            seed = (seed ^ cell.places).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        }
-        let mut rng = Rng::new(seed);
+        let mut rng = Rng::new(cell_seed(cell));
         Self { cell: *cell, shift: std::array::from_fn(|_| rng.unit()) }
     }
 
@@ -63,6 +65,73 @@ impl RegionRays {
         let r = (1.0 - z * z).max(0.0).sqrt();
         (origin, Vec3::new(r * phi.cos(), z, r * phi.sin()))
     }
+}
+
+/// A cell's region views: the GPU backend's form of its region rays
+/// ([`super::DovBackend::region_views`]). As many small cube maps of N² texels a face as it
+/// takes to hold the region rays' count, each from its own origin where the cell's viewers
+/// stand (Halton points 1, 2, … shifted by the cell's own offset, as [`RegionRays`] shifts its
+/// origins) and turned by its own random rotation, so that the views' texels together point
+/// every way from all over the cell rather than along one cube's N² directions. A rasteriser
+/// draws a whole view at once where a ray caster traces its texels one by one; what a cell
+/// sees through a gap depends on where in the cell a ray starts, which small views (many
+/// origins) sample best (docs/dov.md, "Region views on the GPU").
+pub struct RegionViews {
+    /// Per view, its origin and its turn (world direction = turn · the cube map's direction).
+    views: Vec<(Vec3, Mat3)>,
+    cube: super::CubeMap,
+}
+
+impl RegionViews {
+    /// The views of `cell`, `resolution` texels a face edge each, that hold at least `rays`
+    /// texels.
+    pub fn new(cell: &ViewCell, rays: u32, resolution: u32) -> Self {
+        let cube = super::CubeMap::new(resolution);
+        let count = (rays as usize).div_ceil(cube.texel_count());
+        let mut rng = Rng::new(cell_seed(cell) ^ 0x005e_ed0f_7ea1_u64);
+        let shift = Vec3::new(rng.unit(), rng.unit(), rng.unit());
+        let views = (1..=count as u32)
+            .map(|k| {
+                let h = halton3(k) + shift;
+                let origin = cell.point(h - h.floor());
+                (origin, Mat3::from_quat(random_rotation(&mut rng)))
+            })
+            .collect();
+        Self { views, cube }
+    }
+
+    /// The views' origins and turns, in view order.
+    pub fn views(&self) -> &[(Vec3, Mat3)] {
+        &self.views
+    }
+
+    /// The cube map of one view.
+    pub fn cube(&self) -> &super::CubeMap {
+        &self.cube
+    }
+
+    /// Texels over all views: what [`super::DovBackend::region_views`] returns ids for.
+    pub fn texel_count(&self) -> usize {
+        self.views.len() * self.cube.texel_count()
+    }
+
+    /// The ray through the centre of texel `index` of all views' texels (view after view, each
+    /// in [`super::IdCube`]'s order): its view's origin and unit direction.
+    pub fn ray(&self, index: usize) -> (Vec3, Vec3) {
+        let per_view = self.cube.texel_count();
+        let (origin, turn) = self.views[index / per_view];
+        let r = self.cube.resolution() as usize;
+        let t = index % per_view;
+        let (face, row, col) = (t / (r * r), (t / r % r) as u32, (t % r) as u32);
+        (origin, (turn * self.cube.texel_direction(face, row, col)).normalize())
+    }
+}
+
+/// A rotation drawn uniformly (Shoemake's method).
+fn random_rotation(rng: &mut Rng) -> Quat {
+    let (u1, u2, u3) = (rng.unit(), std::f32::consts::TAU * rng.unit(), std::f32::consts::TAU * rng.unit());
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    Quat::from_xyzw(a * u2.sin(), a * u2.cos(), b * u3.sin(), b * u3.cos()).normalize()
 }
 
 /// The region rays' Halton points 1 to `count` in bases 2, 3, 5, 7, 11, before any cell's shift:

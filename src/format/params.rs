@@ -263,6 +263,10 @@ impl InternalLods {
 hdov_storage::named!(InternalLods, "internal LODs");
 hdov_storage::by_names!(InternalLods);
 
+/// Largest [`VisibilityParams::region_views`]: a region view of 16² texels a face already holds
+/// 1,536 rays from one origin, where region sampling needs many origins.
+pub const MAX_REGION_VIEW_RESOLUTION: u32 = 16;
+
 /// Default of [`VisibilityParams::lod_draw_tolerance`] (the GPU backend's LOD-aware drawing): a twentieth of a texel at the face centre.
 /// Half a texel (the first guess) changes some objects' DoV by up to 10 centre texels on a
 /// generated city, because the simplifier's error is not a bound on silhouette movement and a
@@ -367,6 +371,11 @@ pub struct VisibilityParams {
     /// GPU backend: texels of LOD error below which an object is drawn coarser (0 = off).
     #[serde(default)]
     pub lod_draw_tolerance: f32,
+    /// GPU backend: draw the region rays as small turned cube maps of this many texels a face
+    /// edge, one from each of as many origins as that takes ([`crate::dov::sampling::RegionViews`]),
+    /// instead of casting them on the CPU; 0 = cast them (the reference).
+    #[serde(default)]
+    pub region_views: u32,
 }
 
 impl Default for VisibilityParams {
@@ -380,6 +389,7 @@ impl Default for VisibilityParams {
             shard: None,
             zero_dov_floor: FloorTest::DEFAULT.to_vec(),
             lod_draw_tolerance: DEFAULT_LOD_TOLERANCE_TEXELS,
+            region_views: 0,
         }
     }
 }
@@ -458,6 +468,18 @@ impl BuildParams {
             return Err(Error::bad_param(
                 Param::LodDrawTolerance,
                 format!("{} texels is outside 0..={MAX_LOD_DRAW_TOLERANCE}", v.lod_draw_tolerance),
+            ));
+        }
+        if v.region_views > MAX_REGION_VIEW_RESOLUTION {
+            return Err(Error::bad_param(
+                Param::RegionViews,
+                format!("{} texels is outside 0..={MAX_REGION_VIEW_RESOLUTION}", v.region_views),
+            ));
+        }
+        if v.region_views > 0 && v.backend == BackendKind::Cpu {
+            return Err(Error::bad_param(
+                Param::RegionViews,
+                "draws region views on the GPU backend; the cpu backend casts region rays",
             ));
         }
         if let Some(FloorTest::BoxWithin(m)) =
@@ -647,6 +669,9 @@ mod tests {
         );
         assert!(with(|v| v.layouts.push(LayoutKind::Vertical)).contains("twice"));
         assert!(with(|v| v.lod_draw_tolerance = f32::NAN).starts_with("lod_draw_tolerance:"));
+        assert!(with(|v| v.region_views = 17).starts_with("region_views:"));
+        let cpu_views = with(|v| (v.backend, v.region_views) = (BackendKind::Cpu, 2));
+        assert!(cpu_views.starts_with("region_views:") && cpu_views.contains("cpu backend"), "{cpu_views}");
         let page = BuildParams { page_size: 64, ..Default::default() };
         assert!(page.check(None).unwrap_err().to_string().starts_with("page_size:"));
         let p = BuildParams::default();

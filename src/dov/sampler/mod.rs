@@ -62,12 +62,14 @@ pub struct Tally<'a> {
     pub probe_rays: u64,
     /// Rays cast to measure the footprints of what was found.
     pub footprint_rays: u64,
+    /// Region views drawn (the GPU's region sampling, [`DovBackend::region_views`]).
+    pub region_views: u64,
 }
 
 impl<'a> Tally<'a> {
     /// A tally of `planned` measurements, none done.
     pub fn new(planned: usize, progress: &'a dyn Report) -> Self {
-        Tally { done: 0, planned, progress, probe_rays: 0, footprint_rays: 0 }
+        Tally { done: 0, planned, progress, probe_rays: 0, footprint_rays: 0, region_views: 0 }
     }
 
     /// One more measurement done; `beyond_plan` when it was not counted in the plan.

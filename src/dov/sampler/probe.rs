@@ -33,7 +33,7 @@ use rayon::prelude::*;
 use super::{CellSampler, CellSite, Tally};
 use crate::dov::cubemap::{FACE_COUNT, face_basis, uv_direction};
 use crate::dov::rays::RayCaster;
-use crate::dov::sampling::{RegionRays, RegionSequence, halton_point, seen_by};
+use crate::dov::sampling::{RegionRays, RegionSequence, RegionViews, halton_point, seen_by};
 use crate::dov::{BACK_FACE_BIT, CubeMap, DovBackend, NO_OBJECT, PointDov};
 use crate::error::{Error, Param, Result};
 use crate::format::sampling::RayProbing;
@@ -354,22 +354,32 @@ fn region_rays_met(caster: &dyn RayCaster, cell: &ViewCell, sequence: &RegionSeq
     met
 }
 
-/// [`region_finds`], then rays beside each rare find (met by at most [`BORDER_RARE_HITS`] rays):
-/// from the origin of the ray that met an object,
-/// rays at [`BORDER_ANGLES`] around its direction, in [`BORDER_AZIMUTHS`] directions, and the
-/// same around each object they meet that nothing met before, round after round, until a round
-/// finds nothing new or `budget` rays are cast (the adaptive border sampling of guided
-/// visibility sampling, Wonka et al. 2006). A gap that one ray went through is seen from that
-/// origin, and what lies beside the ray's hit (the rest of a wall behind a doorway, the floor
-/// beyond a ledge) is seen through it too, where a ray from anywhere else in the cell rarely
-/// passes. Returns the finds in object order and the border rays cast.
-pub fn region_and_border_finds(
-    caster: &dyn RayCaster,
-    cell: &ViewCell,
-    sequence: &RegionSequence,
-    budget: u64,
-) -> (Vec<(u32, Vec3)>, u64) {
-    let met = region_rays_met(caster, cell, sequence);
+/// What region views' ids (`ids`, of `views`: [`DovBackend::region_views`]) show from the front,
+/// as [`region_rays_met`] gives it for region rays: each object once, with the ray through the
+/// centre of the first texel that showed it and how many texels did, in object order.
+fn region_views_met(views: &RegionViews, ids: &[u32]) -> Vec<(u32, (Vec3, Vec3), u32)> {
+    let mut first: HashMap<u32, (usize, u32)> = HashMap::new();
+    for (k, &id) in ids.iter().enumerate() {
+        if id != NO_OBJECT && id & BACK_FACE_BIT == 0 {
+            first.entry(id).or_insert((k, 0)).1 += 1;
+        }
+    }
+    let mut met: Vec<(u32, (Vec3, Vec3), u32)> = first.into_iter().map(|(id, (k, n))| (id, views.ray(k), n)).collect();
+    met.sort_unstable_by_key(|m| m.0);
+    met
+}
+
+/// The finds of region sampling (`met`: [`region_rays_met`] or [`region_views_met`]), then rays
+/// beside each rare find (met by at most [`BORDER_RARE_HITS`] rays or texels): from the origin
+/// of the ray that met an object, rays at [`BORDER_ANGLES`] around its direction, in
+/// [`BORDER_AZIMUTHS`] directions, and the same around each object they meet that nothing met
+/// before, round after round, until a round finds nothing new or `budget` rays are cast (the
+/// adaptive border sampling of guided visibility sampling, Wonka et al. 2006). A gap that one
+/// ray went through is seen from that origin, and what lies beside the ray's hit (the rest of a
+/// wall behind a doorway, the floor beyond a ledge) is seen through it too, where a ray from
+/// anywhere else in the cell rarely passes. Returns the finds in object order and the border
+/// rays cast.
+fn border_finds(caster: &dyn RayCaster, met: Vec<(u32, (Vec3, Vec3), u32)>, budget: u64) -> (Vec<(u32, Vec3)>, u64) {
     // Rays beside an object that many rays met would find what those rays found around it.
     let mut frontier: Vec<(u32, (Vec3, Vec3))> =
         met.iter().filter(|m| m.2 <= BORDER_RARE_HITS).map(|&(id, ray, _)| (id, ray)).collect();
@@ -418,7 +428,7 @@ pub fn region_and_border_finds(
 /// through a gap.
 const BORDER_RARE_HITS: u32 = 2;
 
-/// Angles (degrees) off a find's ray of the border rays beside it ([`region_and_border_finds`]).
+/// Angles (degrees) off a find's ray of the border rays beside it ([`border_finds`]).
 const BORDER_ANGLES: [f32; 3] = [0.5, 1.5, 4.0];
 
 /// Border rays per angle, evenly around the find's ray.
@@ -616,12 +626,12 @@ impl CellSampler for Probe {
     }
 
     fn prepare(&mut self, backend: &mut dyn DovBackend, grid: &ViewGrid, cells: &[usize], tally: &mut Tally) -> Result<()> {
-        let Some(caster) = backend.ray_caster() else {
+        if backend.ray_caster().is_none() {
             return Err(Error::bad_param(
                 Param::Samples,
                 format!("{} casts single rays: the {} backend has none (use the cpu backend)", self.probing, backend.name()),
             ));
-        };
+        }
         if self.probing.region == 0 {
             return Ok(());
         }
@@ -634,9 +644,22 @@ impl CellSampler for Probe {
         let sequence = RegionSequence::new(self.probing.region);
         let budget = u64::from(self.probing.region) / 2;
         for id in ids {
-            let (finds, border) = region_and_border_finds(caster, &grid.view_cell(id), &sequence, budget);
+            let cell = grid.view_cell(id);
+            // Drawn where the backend draws region views (the GPU), else cast.
+            let met = match backend.region_views(&cell, self.probing.region) {
+                Some(drawn) => {
+                    let (views, ids) = drawn?;
+                    tally.region_views += views.views().len() as u64;
+                    region_views_met(&views, &ids)
+                }
+                None => {
+                    tally.probe_rays += u64::from(self.probing.region);
+                    region_rays_met(backend.ray_caster().expect("checked above"), &cell, &sequence)
+                }
+            };
+            let (finds, border) = border_finds(backend.ray_caster().expect("checked above"), met, budget);
             self.region.insert(id, finds);
-            tally.probe_rays += u64::from(self.probing.region) + border;
+            tally.probe_rays += border;
         }
         Ok(())
     }

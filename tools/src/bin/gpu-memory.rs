@@ -76,7 +76,7 @@ fn report(name: &str, scene: &Scene, points: usize, r: u32) -> Result<(), Box<dy
         lods: Some(&lods),
         lod_tolerance_texels: DEFAULT_LOD_TOLERANCE_TEXELS,
         direct_draws,
-        near: None,
+        ..Default::default()
     };
     let t = Instant::now();
     let mut indirect = GpuBackend::with_options(scene, r, &lod_options(false))?;

@@ -64,6 +64,12 @@ struct Args {
     /// `hdov build --zero-dov-floor`, comma-separated (`none`: no floor; default: the build's).
     #[arg(long, value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
+    /// `hdov build --region-views` (with `--backend gpu`: region rays drawn as views of N² texels a face).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    region_views: u32,
+    /// `hdov build --backend` (the GPU backend draws region views: on Mesa's CPU drivers here).
+    #[arg(long, default_value = "cpu")]
+    backend: BackendKind,
     /// `hdov build --resolution`.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
@@ -197,7 +203,8 @@ fn measure(
         objects: parts,
         visibility: Some(VisibilityParams {
             resolution: args.resolution,
-            backend: BackendKind::Cpu,
+            backend: args.backend,
+            region_views: args.region_views,
             sampling: args.samples.unwrap_or_default(),
             zero_dov_floor: floors(&args.zero_dov_floor)?,
             ..Default::default()

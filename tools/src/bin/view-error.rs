@@ -111,6 +111,12 @@ struct Args {
     /// Seed of the viewpoints, the cell subset and the frames' directions.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// `hdov build --region-views` (with `--backend gpu`: region rays drawn as views of N² texels a face).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    region_views: u32,
+    /// Backend of the builds, `hdov build --backend` (the GPU backend draws region views).
+    #[arg(long, value_name = "B", default_value = "cpu")]
+    backend: BackendKind,
     /// Cube-map resolution R of the builds.
     #[arg(long, value_name = "R", default_value_t = 128)]
     resolution: u32,
@@ -216,7 +222,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let floors = FloorTest::default_for(&sampling);
         let visibility = VisibilityParams {
             resolution: r,
-            backend: BackendKind::Cpu,
+            backend: args.backend,
+            region_views: args.region_views,
             sampling,
             zero_dov_floor: floors,
             ..Default::default()
