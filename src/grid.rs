@@ -353,6 +353,12 @@ impl ViewGrid {
         if kept.is_empty() { all.to_vec() } else { kept }
     }
 
+    /// Whether the view cells were made where viewers stand (`Scene::view_grid` without a grid:
+    /// eye height above floors, cut at walls), rather than a whole regular grid.
+    pub fn where_viewers_stand(&self) -> bool {
+        self.places.is_some()
+    }
+
     /// Whether cell `id` is a view cell.
     pub fn is_present(&self, id: usize) -> bool {
         match id.checked_sub(self.lattice_count()) {

@@ -286,6 +286,28 @@ fn a_building_gets_cells_on_both_storeys() {
     }
     let text = stdout_of(&hdov(&["info", db_s]));
     assert!(text.contains("where a viewer can stand"), "{text}");
+    // Cells where viewers stand take the box and parts floors, a grid the neighbours too
+    // (decision 127); a floor named is a floor taken.
+    let floors = |db: &Path| -> Vec<String> {
+        let manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(db.join("manifest.json")).unwrap()).unwrap();
+        let floors = manifest.pointer("/build/visibility/zero_dov_floor").expect("the floors are recorded");
+        floors.as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect()
+    };
+    assert_eq!(floors(&db), ["box", "parts"]);
+    for (extra, expected) in [
+        (&["--grid", "5x2x5"][..], &["box", "neighbours", "parts"][..]),
+        (&["--cell-size", "2", "--zero-dov-floor", "box,neighbours"], &["box", "neighbours"]),
+    ] {
+        let other = tmp.path().join(format!("db{}", extra.len()));
+        let args = [
+            &["build", scene, "--out", other.to_str().unwrap(), "--resolution", "16", "--samples", "region"][..],
+            extra,
+        ];
+        let o = hdov(&args.concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(floors(&other), expected, "{extra:?}");
+    }
 }
 
 #[test]

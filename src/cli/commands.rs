@@ -148,10 +148,11 @@ pub struct VisibilityArgs {
     region_views: u32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), parts (a part
-    /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts;
-    /// box alone with `--samples probe` without region rays (its rays check what the neighbour
-    /// test would guess); with region rays the neighbours test also takes what the neighbouring
-    /// cells' region rays met.
+    /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts on
+    /// a grid (--grid, --region, or the scene's own), box,parts on cells made where viewers
+    /// stand (their neighbours' corners see into other rooms); box alone with `--samples probe`
+    /// without region rays (its rays check what the neighbour test would guess); with region
+    /// rays the neighbours test also takes what the neighbouring cells' region rays met.
     #[arg(long, value_delimiter = ',')]
     zero_dov_floor: Vec<String>,
     /// Build the tree and LODs only, without visibility.
@@ -160,12 +161,13 @@ pub struct VisibilityArgs {
 }
 
 impl VisibilityArgs {
-    fn params(&self) -> Result<Option<VisibilityParams>> {
+    /// The parameters, on cells made where viewers stand or not (the default floors differ).
+    fn params(&self, where_viewers_stand: bool) -> Result<Option<VisibilityParams>> {
         if self.no_visibility {
             return Ok(None);
         }
         let zero_dov_floor = if self.zero_dov_floor.is_empty() {
-            FloorTest::default_for(&self.samples)
+            FloorTest::default_for(&self.samples, where_viewers_stand)
         } else {
             FloorTest::parse_list(self.zero_dov_floor.iter().map(String::as_str))
                 .map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?
@@ -305,21 +307,25 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
 }
 
 pub fn build(a: BuildArgs) -> Result<()> {
-    let params = BuildParams {
-        objects: a.objects,
-        page_size: a.page_size,
-        fanout: a.fanout,
-        tree: a.tree,
-        lod: LodParams { internal: a.internal_lods, ..Default::default() },
-        visibility: a.visibility.params()?,
+    let params = |where_viewers_stand| -> Result<BuildParams> {
+        Ok(BuildParams {
+            objects: a.objects,
+            page_size: a.page_size,
+            fanout: a.fanout,
+            tree: a.tree,
+            lod: LodParams { internal: a.internal_lods, ..Default::default() },
+            visibility: a.visibility.params(where_viewers_stand)?,
+        })
     };
     // Every argument that does not need the scene is checked before the scene is read.
-    params.check(None)?;
+    params(false)?.check(None)?;
     let (mut scene, warnings) = Scene::load(&a.scene)?;
     for w in warnings {
         eprintln!("warning: {w}");
     }
-    scene.grid = Some(scene.view_grid(a.region, a.grid, a.cell_size, a.eye_heights)?);
+    let grid = scene.view_grid(a.region, a.grid, a.cell_size, a.eye_heights)?;
+    let params = params(grid.where_viewers_stand())?;
+    scene.grid = Some(grid);
     let progress = Progress::for_terminal(a.json);
     let report = match &a.visibility.base {
         Some(base) => hdov::build_shard_on(&scene, base, &a.out, &params, overwrite(a.force), &progress)?,

@@ -206,7 +206,7 @@ fn measure(
             backend: args.backend,
             region_views: args.region_views,
             sampling: args.samples.unwrap_or_default(),
-            zero_dov_floor: floors(&args.zero_dov_floor)?,
+            zero_dov_floor: floors(args, scene)?,
             ..Default::default()
         }),
         ..Default::default()
@@ -317,12 +317,14 @@ fn explain(
     }
 }
 
-/// The floor tests named (`none`: none), or the build's default without a name.
-fn floors(names: &[String]) -> Result<Vec<FloorTest>, Box<dyn std::error::Error>> {
-    if names.is_empty() {
-        return Ok(VisibilityParams::default().zero_dov_floor);
+/// The floor tests `--zero-dov-floor` names (`none`: none), or without a name `hdov build`'s
+/// default for the sampler and the scene's cells.
+fn floors(args: &Args, scene: &Scene) -> Result<Vec<FloorTest>, Box<dyn std::error::Error>> {
+    if args.zero_dov_floor.is_empty() {
+        let stand = scene.grid.as_ref().is_some_and(hdov::ViewGrid::where_viewers_stand);
+        return Ok(FloorTest::default_for(&args.samples.unwrap_or_default(), stand));
     }
-    Ok(FloorTest::parse_list(names.iter().map(String::as_str))?)
+    Ok(FloorTest::parse_list(args.zero_dov_floor.iter().map(String::as_str))?)
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {

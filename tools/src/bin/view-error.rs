@@ -139,6 +139,10 @@ struct Args {
     /// a cell cut into parts of two cells, `hdov build --objects`).
     #[arg(long, default_value = "file")]
     objects: ObjectParts,
+    /// `hdov build --zero-dov-floor` of every build, comma-separated (`none`: no floor; default:
+    /// each sampler's own, as `hdov build` takes it).
+    #[arg(long, value_name = "F,F,..", value_delimiter = ',')]
+    zero_dov_floor: Vec<String>,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -219,7 +223,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows: Vec<Row> = Vec::new();
     for (k, name) in samplers.iter().enumerate() {
         let sampling: Sampling = name.parse()?;
-        let floors = FloorTest::default_for(&sampling);
+        let floors = if args.zero_dov_floor.is_empty() {
+            FloorTest::default_for(&sampling, grid.where_viewers_stand())
+        } else {
+            FloorTest::parse_list(args.zero_dov_floor.iter().map(String::as_str))?
+        };
         let visibility = VisibilityParams {
             resolution: r,
             backend: args.backend,
