@@ -160,6 +160,8 @@ fn gpu_region_views_are_the_rays_they_stand_for() {
     let (views, drawn) = gpu.region_views(&cell, 100 * 384).expect("the GPU backend draws region views").unwrap();
     assert_eq!(views.views().len(), 100);
     assert_eq!(views.cube().resolution(), region);
+    // The manifest's backend says that region rays were drawn.
+    assert!(gpu.name().ends_with("region views of 8² texels a face"), "{}", gpu.name());
     // Direct draws (where a device has no indirect ones) draw the same texels.
     let direct = hdov::dov::gpu::GpuOptions { direct_draws: true, ..options };
     let (_, direct) =

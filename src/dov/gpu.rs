@@ -639,7 +639,10 @@ fn clip_from_rel(b: FaceBasis, near: f32) -> Mat4 {
 
 impl DovBackend for GpuBackend {
     fn name(&self) -> String {
-        format!("gpu ({})", self.gpu.adapter_name)
+        match self.region_resolution {
+            0 => format!("gpu ({})", self.gpu.adapter_name),
+            r => format!("gpu ({}), region views of {r}² texels a face", self.gpu.adapter_name),
+        }
     }
 
     fn resolution(&self) -> u32 {
