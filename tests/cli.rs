@@ -286,8 +286,8 @@ fn a_building_gets_cells_on_both_storeys() {
     }
     let text = stdout_of(&hdov(&["info", db_s]));
     assert!(text.contains("where a viewer can stand"), "{text}");
-    // Cells where viewers stand take the box and parts floors, a grid the neighbours too
-    // (decision 127); a floor named is a floor taken.
+    // Objects in parts on cells where viewers stand take the box and parts floors, a grid or
+    // the file's objects the neighbours too (decision 127); a floor named is a floor taken.
     let floors = |db: &Path| -> Vec<String> {
         let manifest: serde_json::Value =
             serde_json::from_slice(&std::fs::read(db.join("manifest.json")).unwrap()).unwrap();
@@ -297,7 +297,8 @@ fn a_building_gets_cells_on_both_storeys() {
     assert_eq!(floors(&db), ["box", "parts"]);
     for (extra, expected) in [
         (&["--grid", "5x2x5"][..], &["box", "neighbours", "parts"][..]),
-        (&["--cell-size", "2", "--zero-dov-floor", "box,neighbours"], &["box", "neighbours"]),
+        (&["--cell-size", "2", "--objects", "file"], &["box", "neighbours", "parts"]),
+        (&["--cell-size", "2", "--zero-dov-floor", "box,neighbours", "--objects", "file"], &["box", "neighbours"]),
     ] {
         let other = tmp.path().join(format!("db{}", extra.len()));
         let args = [

@@ -149,8 +149,8 @@ pub struct VisibilityArgs {
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), parts (a part
     /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts on
-    /// a grid (--grid, --region, or the scene's own), box,parts on cells made where viewers
-    /// stand (their neighbours' corners see into other rooms); box alone with `--samples probe`
+    /// a grid (--grid, --region, or the scene's own) or with --objects file, box,parts on cells
+    /// made where viewers stand (their neighbours' corners see into other rooms); box alone with `--samples probe`
     /// without region rays (its rays check what the neighbour test would guess); with region
     /// rays the neighbours test also takes what the neighbouring cells' region rays met.
     #[arg(long, value_delimiter = ',')]
@@ -161,13 +161,14 @@ pub struct VisibilityArgs {
 }
 
 impl VisibilityArgs {
-    /// The parameters, on cells made where viewers stand or not (the default floors differ).
-    fn params(&self, where_viewers_stand: bool) -> Result<Option<VisibilityParams>> {
+    /// The parameters, for objects cut into parts on cells made where viewers stand or not (the
+    /// default floors differ).
+    fn params(&self, parts_where_viewers_stand: bool) -> Result<Option<VisibilityParams>> {
         if self.no_visibility {
             return Ok(None);
         }
         let zero_dov_floor = if self.zero_dov_floor.is_empty() {
-            FloorTest::default_for(&self.samples, where_viewers_stand)
+            FloorTest::default_for(&self.samples, parts_where_viewers_stand)
         } else {
             FloorTest::parse_list(self.zero_dov_floor.iter().map(String::as_str))
                 .map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?
@@ -307,14 +308,14 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
 }
 
 pub fn build(a: BuildArgs) -> Result<()> {
-    let params = |where_viewers_stand| -> Result<BuildParams> {
+    let params = |parts_where_viewers_stand| -> Result<BuildParams> {
         Ok(BuildParams {
             objects: a.objects,
             page_size: a.page_size,
             fanout: a.fanout,
             tree: a.tree,
             lod: LodParams { internal: a.internal_lods, ..Default::default() },
-            visibility: a.visibility.params(where_viewers_stand)?,
+            visibility: a.visibility.params(parts_where_viewers_stand)?,
         })
     };
     // Every argument that does not need the scene is checked before the scene is read.
@@ -324,7 +325,7 @@ pub fn build(a: BuildArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     let grid = scene.view_grid(a.region, a.grid, a.cell_size, a.eye_heights)?;
-    let params = params(grid.where_viewers_stand())?;
+    let params = params(grid.where_viewers_stand() && a.objects == hdov::ObjectParts::Geometry)?;
     scene.grid = Some(grid);
     let progress = Progress::for_terminal(a.json);
     let report = match &a.visibility.base {

@@ -173,16 +173,17 @@ impl FloorTest {
 
     /// The floors a build with `sampling` takes unless it names its own (`hdov build`): the box
     /// alone for ray probing without region rays (its rays check what the neighbours test would
-    /// guess); box and parts on cells made where viewers stand (`where_viewers_stand`: rooms,
-    /// storeys and levels, whose neighbouring corners see into other rooms and along other
-    /// corridors: the neighbours test made answers 1.3–1.6× larger on four game levels and 6.7×
-    /// on a house, for misses all within issue 31's bounds without it; decision 127); otherwise
-    /// [`FloorTest::DEFAULT`] (open grids, where the neighbours test keeps street scenes' misses
-    /// 15× lower).
-    pub fn default_for(sampling: &Sampling, where_viewers_stand: bool) -> Vec<FloorTest> {
+    /// guess); box and parts for objects cut into parts on cells made where viewers stand
+    /// (`parts_where_viewers_stand`: rooms, storeys and levels, whose neighbouring corners see
+    /// into other rooms and along other corridors: the neighbours test made answers 1.3–1.6×
+    /// larger on four game levels and 6.7× on a house, for misses that the parts test keeps
+    /// within issue 31's bounds; decision 127); otherwise [`FloorTest::DEFAULT`] (open grids,
+    /// where the neighbours test keeps street scenes' misses 15× lower, and the file's objects,
+    /// which the parts test cannot reach).
+    pub fn default_for(sampling: &Sampling, parts_where_viewers_stand: bool) -> Vec<FloorTest> {
         match sampling {
             Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
-            _ if where_viewers_stand => vec![FloorTest::BoxWithin(0.0), FloorTest::PartNeighbours],
+            _ if parts_where_viewers_stand => vec![FloorTest::BoxWithin(0.0), FloorTest::PartNeighbours],
             _ => FloorTest::DEFAULT.to_vec(),
         }
     }
