@@ -682,14 +682,11 @@ impl DovBackend for GpuBackend {
             self.face_commands(face_basis(face), eye, &chosen, &mut commands);
             starts[face + 1] = commands.len();
         }
-        self.draw_commands += commands.len() as u64;
-        self.triangles_drawn +=
-            commands.iter().map(|c| u64::from(c.index_count / 3) * u64::from(c.instance_count)).sum::<u64>();
+        self.count_drawn(&commands);
         if let Some(indirect) = &self.indirect
             && !commands.is_empty()
         {
-            let bytes: Vec<u8> = commands.iter().flat_map(|c| c.as_bytes().iter().copied()).collect();
-            self.gpu.queue.write_buffer(indirect, 0, &bytes);
+            self.gpu.queue.write_buffer(indirect, 0, &command_bytes(&commands));
         }
         let mut encoder =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("dov cube") });
@@ -699,23 +696,8 @@ impl DovBackend for GpuBackend {
             self.issue(&mut pass, &self.face_bind_groups[face], &commands[starts[face]..starts[face + 1]], indirect);
         }
         for (face, (texture, _)) in self.face_targets.iter().enumerate() {
-            encoder.copy_texture_to_buffer(
-                wgpu::TexelCopyTextureInfo {
-                    texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &self.readback,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: face as u64 * self.padded_row_bytes as u64 * r as u64,
-                        bytes_per_row: Some(self.padded_row_bytes),
-                        rows_per_image: Some(r),
-                    },
-                },
-                wgpu::Extent3d { width: r, height: r, depth_or_array_layers: 1 },
-            );
+            let offset = face as u64 * self.padded_row_bytes as u64 * r as u64;
+            copy_ids(&mut encoder, texture, (&self.readback, offset, self.padded_row_bytes), r, r);
         }
         self.gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(validation.pop()) {
@@ -725,7 +707,37 @@ impl DovBackend for GpuBackend {
     }
 }
 
+/// The draw commands as the bytes of an indirect buffer.
+fn command_bytes(commands: &[DrawIndexedIndirectArgs]) -> Vec<u8> {
+    commands.iter().flat_map(|c| c.as_bytes().iter().copied()).collect()
+}
+
+/// Copies the top `width × height` texels of the id target `texture` into `to` = (buffer, byte
+/// offset, padded bytes a row).
+fn copy_ids(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, to: (&wgpu::Buffer, u64, u32), width: u32, height: u32) {
+    let (buffer, offset, padded_row_bytes) = to;
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset,
+                bytes_per_row: Some(padded_row_bytes),
+                rows_per_image: Some(height),
+            },
+        },
+        wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+    );
+}
+
 impl GpuBackend {
+    /// Counts `commands` as drawn ([`GpuBackend::draw_commands`], [`GpuBackend::triangles_drawn`]).
+    fn count_drawn(&mut self, commands: &[DrawIndexedIndirectArgs]) {
+        self.draw_commands += commands.len() as u64;
+        self.triangles_drawn +=
+            commands.iter().map(|c| u64::from(c.index_count / 3) * u64::from(c.instance_count)).sum::<u64>();
+    }
+
     /// Issues `commands` in `pass` with the face uniforms of `bind_group`: as one indirect
     /// multi-draw of the commands that start at command `first` of `indirect` where given, else
     /// as direct draws.
@@ -821,11 +833,9 @@ impl GpuBackend {
                     starts[slot + 1] = commands.len();
                 }
             }
-            self.draw_commands += commands.len() as u64;
-            self.triangles_drawn +=
-                commands.iter().map(|c| u64::from(c.index_count / 3) * u64::from(c.instance_count)).sum::<u64>();
+            self.count_drawn(&commands);
             if self.indirect.is_some() && !commands.is_empty() {
-                let bytes: Vec<u8> = commands.iter().flat_map(|c| c.as_bytes().iter().copied()).collect();
+                let bytes = command_bytes(&commands);
                 let region = self.region.as_mut().expect("made above");
                 if region.indirect.as_ref().is_none_or(|b| b.size() < bytes.len() as u64) {
                     region.indirect = Some(self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -846,28 +856,13 @@ impl GpuBackend {
                     let (x, y) = ((slot % FACE_COUNT) as u32 * r, (slot / FACE_COUNT) as u32 * r);
                     pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
                     pass.set_scissor_rect(x, y, r, r);
-                    let indirect = region.indirect.as_ref().filter(|_| self.indirect.is_some()).map(|b| (b, starts[slot]));
+                    // The region's command buffer exists only where the device draws indirectly.
+                    let indirect = region.indirect.as_ref().map(|b| (b, starts[slot]));
                     self.issue(&mut pass, &region.bind_groups[slot], &commands[starts[slot]..starts[slot + 1]], indirect);
                 }
             }
             let rows = chunk.len() as u32 * r;
-            encoder.copy_texture_to_buffer(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &region.atlas,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &region.readback,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(region.padded_row_bytes),
-                        rows_per_image: Some(rows),
-                    },
-                },
-                wgpu::Extent3d { width: r * FACE_COUNT as u32, height: rows, depth_or_array_layers: 1 },
-            );
+            copy_ids(&mut encoder, &region.atlas, (&region.readback, 0, region.padded_row_bytes), r * FACE_COUNT as u32, rows);
             self.gpu.queue.submit([encoder.finish()]);
             if let Some(e) = pollster::block_on(validation.pop()) {
                 return Err(Error::Gpu(format!("{}: drawing region views: {e}", self.gpu.adapter_name)));
