@@ -11,7 +11,7 @@ use hdov::text::{parse_box, parse_dims, parse_eye_heights, parse_matrix};
 use hdov::{
     Aabb, BackendKind, BuildParams, BuildReport, Database, DovCodec, Error, EyeHeights, FloorTest, Info, InternalLods,
     LayoutKind, LodParams, Manifest, ObjectParts, Overwrite, Param, Progress, Result, Sampling, Scene, Shard,
-    TreeAlgorithm, VisibilityParams,
+    TreeAlgorithm, ViewGrid, VisibilityParams,
 };
 
 #[derive(Args)]
@@ -161,18 +161,14 @@ pub struct VisibilityArgs {
 }
 
 impl VisibilityArgs {
-    /// The parameters, for objects cut into parts on cells made where viewers stand or not (the
-    /// default floors differ).
-    fn params(&self, parts_where_viewers_stand: bool) -> Result<Option<VisibilityParams>> {
+    /// The parameters for `objects` on view cells `cells` (the default floors depend on both;
+    /// `None` before the cells are made).
+    fn params(&self, objects: ObjectParts, cells: Option<&ViewGrid>) -> Result<Option<VisibilityParams>> {
         if self.no_visibility {
             return Ok(None);
         }
-        let zero_dov_floor = if self.zero_dov_floor.is_empty() {
-            FloorTest::default_for(&self.samples, parts_where_viewers_stand)
-        } else {
-            FloorTest::parse_list(self.zero_dov_floor.iter().map(String::as_str))
-                .map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?
-        };
+        let zero_dov_floor = FloorTest::chosen(&self.zero_dov_floor, &self.samples, objects, cells)
+            .map_err(|r| Error::bad_param(Param::ZeroDovFloor, r))?;
         Ok(Some(VisibilityParams {
             resolution: self.resolution,
             backend: self.backend,
@@ -308,24 +304,24 @@ fn generate_city(out: &Path, mut city: CityParams, detail: Option<&Path>, replac
 }
 
 pub fn build(a: BuildArgs) -> Result<()> {
-    let params = |parts_where_viewers_stand| -> Result<BuildParams> {
+    let params = |cells: Option<&ViewGrid>| -> Result<BuildParams> {
         Ok(BuildParams {
             objects: a.objects,
             page_size: a.page_size,
             fanout: a.fanout,
             tree: a.tree,
             lod: LodParams { internal: a.internal_lods, ..Default::default() },
-            visibility: a.visibility.params(parts_where_viewers_stand)?,
+            visibility: a.visibility.params(a.objects, cells)?,
         })
     };
     // Every argument that does not need the scene is checked before the scene is read.
-    params(false)?.check(None)?;
+    params(None)?.check(None)?;
     let (mut scene, warnings) = Scene::load(&a.scene)?;
     for w in warnings {
         eprintln!("warning: {w}");
     }
     let grid = scene.view_grid(a.region, a.grid, a.cell_size, a.eye_heights)?;
-    let params = params(grid.where_viewers_stand() && a.objects == hdov::ObjectParts::Geometry)?;
+    let params = params(Some(&grid))?;
     scene.grid = Some(grid);
     let progress = Progress::for_terminal(a.json);
     let report = match &a.visibility.base {

@@ -171,21 +171,37 @@ impl FloorTest {
     /// A build's floors unless it names its own: box, neighbours and parts.
     pub const DEFAULT: [FloorTest; 3] = [FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners, FloorTest::PartNeighbours];
 
-    /// The floors a build with `sampling` takes unless it names its own (`hdov build`): the box
-    /// alone for ray probing without region rays (its rays check what the neighbours test would
-    /// guess); box and parts for objects cut into parts on cells made where viewers stand
-    /// (`parts_where_viewers_stand`: rooms, storeys and levels, whose neighbouring corners see
-    /// into other rooms and along other corridors: the neighbours test made answers 1.3–1.6×
-    /// larger on four game levels and 6.7× on a house, for misses that the parts test keeps
-    /// within issue 31's bounds; decision 127); otherwise [`FloorTest::DEFAULT`] (open grids,
-    /// where the neighbours test keeps street scenes' misses 15× lower, and the file's objects,
-    /// which the parts test cannot reach).
-    pub fn default_for(sampling: &Sampling, parts_where_viewers_stand: bool) -> Vec<FloorTest> {
+    /// The floors a build with `sampling`, `objects` and view cells `cells` takes unless it
+    /// names its own (`hdov build`): the box alone for ray probing without region rays (its
+    /// rays check what the neighbours test would guess); box and parts for objects cut into
+    /// parts on cells made where viewers stand ([`ViewGrid::where_viewers_stand`]: rooms,
+    /// storeys and levels, whose neighbouring corners see into other rooms and along other
+    /// corridors: the neighbours test made answers 1.3–1.6× larger on four game levels and 6.7×
+    /// on a house, for misses that the parts test keeps within issue 31's bounds; decision
+    /// 127); otherwise, and while the cells are not yet known (`None`), [`FloorTest::DEFAULT`]
+    /// (open grids, where the neighbours test keeps street scenes' misses 15× lower, and the
+    /// file's objects, which the parts test cannot reach).
+    pub fn default_for(sampling: &Sampling, objects: ObjectParts, cells: Option<&ViewGrid>) -> Vec<FloorTest> {
+        let rooms = objects == ObjectParts::Geometry && cells.is_some_and(ViewGrid::where_viewers_stand);
         match sampling {
             Sampling::Probe(p) if p.region == 0 => vec![FloorTest::BoxWithin(0.0)],
-            _ if parts_where_viewers_stand => vec![FloorTest::BoxWithin(0.0), FloorTest::PartNeighbours],
+            _ if rooms => vec![FloorTest::BoxWithin(0.0), FloorTest::PartNeighbours],
             _ => FloorTest::DEFAULT.to_vec(),
         }
+    }
+
+    /// The tests `names` name (`--zero-dov-floor`, [`FloorTest::parse_list`]), or
+    /// [`FloorTest::default_for`] the rest where it names none.
+    pub fn chosen(
+        names: &[String],
+        sampling: &Sampling,
+        objects: ObjectParts,
+        cells: Option<&ViewGrid>,
+    ) -> std::result::Result<Vec<FloorTest>, String> {
+        if names.is_empty() {
+            return Ok(FloorTest::default_for(sampling, objects, cells));
+        }
+        FloorTest::parse_list(names.iter().map(String::as_str))
     }
 
     /// The tests `names` name, as `--zero-dov-floor` lists them; `none` names no test.
@@ -661,13 +677,24 @@ mod tests {
     #[test]
     fn default_floors_follow_the_sampler_and_the_cells() {
         let (b, n, p) = (FloorTest::BoxWithin(0.0), FloorTest::NeighbourCorners, FloorTest::PartNeighbours);
-        assert_eq!(FloorTest::default_for(&Sampling::default(), false), [b, n, p]);
-        assert_eq!(FloorTest::default_for(&Sampling::default(), true), [b, p]);
-        assert_eq!(FloorTest::default_for(&Sampling::CORNERS, true), [b, p]);
+        let mut rooms = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::ONE), [2, 1, 2]);
+        rooms.places = Some(vec![crate::grid::ALL_PLACES; 4]);
+        let grid = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::ONE), [2, 1, 2]);
+        let (parts, file) = (ObjectParts::Geometry, ObjectParts::File);
+        let region = Sampling::default();
+        assert_eq!(FloorTest::default_for(&region, parts, Some(&grid)), [b, n, p]);
+        assert_eq!(FloorTest::default_for(&region, parts, Some(&rooms)), [b, p]);
+        assert_eq!(FloorTest::default_for(&region, parts, None), [b, n, p]);
+        assert_eq!(FloorTest::default_for(&region, file, Some(&rooms)), [b, n, p]);
+        assert_eq!(FloorTest::default_for(&Sampling::CORNERS, parts, Some(&rooms)), [b, p]);
         let no_region = Sampling::Probe(RayProbing { region: 0, ..RayProbing::DEFAULT });
-        for stand in [false, true] {
-            assert_eq!(FloorTest::default_for(&no_region, stand), [b]);
+        for cells in [&grid, &rooms] {
+            assert_eq!(FloorTest::default_for(&no_region, parts, Some(cells)), [b]);
         }
+        let named = FloorTest::chosen(&["box".into(), "neighbours".into()], &region, parts, Some(&rooms));
+        assert_eq!(named.unwrap(), [b, n]);
+        assert_eq!(FloorTest::chosen(&["none".into()], &region, parts, None).unwrap(), []);
+        assert!(FloorTest::chosen(&["walls".into()], &region, parts, None).is_err());
     }
 
     #[test]

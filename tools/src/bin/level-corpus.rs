@@ -206,7 +206,12 @@ fn measure(
             backend: args.backend,
             region_views: args.region_views,
             sampling: args.samples.unwrap_or_default(),
-            zero_dov_floor: floors(args, scene, parts)?,
+            zero_dov_floor: FloorTest::chosen(
+                &args.zero_dov_floor,
+                &args.samples.unwrap_or_default(),
+                parts,
+                scene.grid.as_ref(),
+            )?,
             ..Default::default()
         }),
         ..Default::default()
@@ -315,16 +320,6 @@ fn explain(
             b.max.to_array()
         );
     }
-}
-
-/// The floor tests `--zero-dov-floor` names (`none`: none), or without a name `hdov build`'s
-/// default for the sampler, the objects and the scene's cells.
-fn floors(args: &Args, scene: &Scene, parts: ObjectParts) -> Result<Vec<FloorTest>, Box<dyn std::error::Error>> {
-    if args.zero_dov_floor.is_empty() {
-        let stand = scene.grid.as_ref().is_some_and(hdov::ViewGrid::where_viewers_stand);
-        return Ok(FloorTest::default_for(&args.samples.unwrap_or_default(), stand && parts == ObjectParts::Geometry));
-    }
-    Ok(FloorTest::parse_list(args.zero_dov_floor.iter().map(String::as_str))?)
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {

@@ -223,11 +223,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows: Vec<Row> = Vec::new();
     for (k, name) in samplers.iter().enumerate() {
         let sampling: Sampling = name.parse()?;
-        let floors = if args.zero_dov_floor.is_empty() {
-            FloorTest::default_for(&sampling, grid.where_viewers_stand() && args.objects == ObjectParts::Geometry)
-        } else {
-            FloorTest::parse_list(args.zero_dov_floor.iter().map(String::as_str))?
-        };
+        let floors = FloorTest::chosen(&args.zero_dov_floor, &sampling, args.objects, Some(&grid))?;
         let visibility = VisibilityParams {
             resolution: r,
             backend: args.backend,
