@@ -48,6 +48,10 @@ struct Args {
     /// A level as one mesh (one OBJ group), as a scan or a merged export has it.
     #[arg(long)]
     single_mesh: bool,
+    /// Drop a scene's own grid (`hdov generate city` writes one): cells where viewers stand, as
+    /// for a scene without one.
+    #[arg(long)]
+    without_grid: bool,
     /// Viewpoints of a scene without spawn points: this many floors, drawn at random (seeded)
     /// from those the build's lines find, eyes 1.6 up.
     #[arg(long, default_value_t = 60)]
@@ -141,7 +145,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let views = viewpoints(&level);
             (Scene::load(&obj)?.0, Some(level), views)
         } else {
-            let scene = Scene::load(path)?.0;
+            let mut scene = Scene::load(path)?.0;
+            if args.without_grid {
+                scene.grid = None;
+            }
             let views = standing(&scene, args.cell_size, args.viewpoints)?;
             (scene, None, views)
         };
