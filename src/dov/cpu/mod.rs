@@ -125,9 +125,11 @@ impl CpuBackend {
                 sources.push(BlasSource::Mesh(m));
             }
         }
-        // The world-space BLAS (the biggest, usually) starts first; the obvhs builds are parallel
-        // inside too.
-        let blases: Vec<Option<Blas>> = sources.par_iter().map(|s| build_blas(scene, s)).collect();
+        // The world-space BLASes one after another, each obvhs build parallel inside: two at once
+        // would need both builds' working memory at once ([`WORLD_BLAS_MAX_TRIANGLES`]). The
+        // instanced meshes' (small, many) in parallel.
+        let mut blases: Vec<Option<Blas>> = sources[..world_count].iter().map(|s| build_blas(scene, s)).collect();
+        blases.par_extend(sources[world_count..].par_iter().map(|s| build_blas(scene, s)));
 
         let mut instances = Vec::new();
         let mut boxes = Vec::new();
@@ -336,10 +338,13 @@ fn direction_order(d: Vec3A) -> u64 {
 }
 
 /// The most world-space triangles one BLAS takes. A bigger world goes into several BLASes of
-/// spatially compact groups of objects: a BVH build needs about twice the memory its BVH keeps,
-/// and the huge city's 114 M triangles in one build did not fit in 24 GB. Every scene up to the
-/// large city (11 M) keeps its one world BLAS.
-const WORLD_BLAS_MAX_TRIANGLES: u64 = 12 << 20;
+/// spatially compact groups of objects, built one after another: an obvhs build holds about
+/// 250 bytes a triangle of working memory beside what its BVH keeps (the large city's 10 M
+/// world triangles in one build: 4.5 GB at its peak against 2.0 GB after), and the huge city's
+/// 114 M in one build did not fit in 24 GB. Scenes up to 4 M triangles (the default city's
+/// 2.2 M) keep one world BLAS; more BLASes cost the rays a little (docs/results.md, "The large
+/// city's full grid").
+const WORLD_BLAS_MAX_TRIANGLES: u64 = 4 << 20;
 
 /// `world` (object indices) cut into groups of at most `max` triangles
 /// (an object is never split), in Morton order of their boxes' centres so each group is compact;
