@@ -206,19 +206,15 @@ fn measure(
     work: &std::path::Path,
     csv: &mut Option<std::fs::File>,
 ) -> Result<LevelRow, Box<dyn std::error::Error>> {
+    let sampling = args.samples.unwrap_or_default();
     let params = BuildParams {
         objects: parts,
         visibility: Some(VisibilityParams {
             resolution: args.resolution,
             backend: args.backend,
             region_views: args.region_views,
-            sampling: args.samples.unwrap_or_default(),
-            zero_dov_floor: FloorTest::chosen(
-                &args.zero_dov_floor,
-                &args.samples.unwrap_or_default(),
-                parts,
-                scene.grid.as_ref(),
-            )?,
+            sampling,
+            zero_dov_floor: FloorTest::chosen(&args.zero_dov_floor, &sampling, parts, scene.grid.as_ref())?,
             ..Default::default()
         }),
         ..Default::default()
