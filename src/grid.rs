@@ -82,6 +82,26 @@ impl ViewCell {
         self.bounds.min + rel * self.bounds.extent()
     }
 
+    /// The box of the squares where viewers stand (the whole box for a whole cell), full height.
+    pub fn places_box(&self) -> Aabb {
+        if self.places == ALL_PLACES || self.places == 0 {
+            return self.bounds;
+        }
+        let (mut lo, mut hi) = ([PLACES_PER_EDGE; 2], [0u32; 2]);
+        let mut left = self.places;
+        while left != 0 {
+            let bit = left.trailing_zeros();
+            left &= left - 1;
+            let (x, z) = (bit % PLACES_PER_EDGE, bit / PLACES_PER_EDGE);
+            (lo[0], lo[1], hi[0], hi[1]) = (lo[0].min(x), lo[1].min(z), hi[0].max(x + 1), hi[1].max(z + 1));
+        }
+        let (b, e, edge) = (self.bounds, self.bounds.extent(), PLACES_PER_EDGE as f32);
+        Aabb::new(
+            Vec3::new(b.min.x + e.x * lo[0] as f32 / edge, b.min.y, b.min.z + e.z * lo[1] as f32 / edge),
+            Vec3::new(b.min.x + e.x * hi[0] as f32 / edge, b.max.y, b.min.z + e.z * hi[1] as f32 / edge),
+        )
+    }
+
     /// The square of the footprint holding `p` (clamped to the footprint): its bit.
     pub fn square_of(&self, p: Vec3) -> u32 {
         let b = self.bounds;
@@ -188,6 +208,15 @@ pub fn place_parts(mask: u64) -> Vec<u64> {
         parts.push(part);
     }
     parts
+}
+
+/// The four quarters of a footprint's squares (4 × 4 squares each), as masks of places.
+pub const QUARTERS: [u64; 4] = [0x0f0f_0f0f, 0xf0f0_f0f0, 0x0f0f_0f0f << 32, 0xf0f0_f0f0 << 32];
+
+/// A mask of places cut into quarters ([`QUARTERS`]): each quarter's squares that 4-neighbouring
+/// squares join ([`place_parts`]), quarter by quarter.
+pub fn quarter_parts(mask: u64) -> Vec<u64> {
+    QUARTERS.iter().flat_map(|q| place_parts(mask & q)).collect()
 }
 
 /// The ids `id` gives the lattice points of the box whose range along each axis is
@@ -315,6 +344,17 @@ impl ViewGrid {
         self.parts_of_cell(id).find(|&k| self.parts[k].places & bit != 0).map(|k| self.lattice_count() + k)
     }
 
+    /// The view cells of lattice cell `id`: itself where it is one, then its further parts.
+    pub fn view_cells_of(&self, id: usize) -> impl Iterator<Item = usize> + '_ {
+        let lattice = self.lattice_count();
+        (id < lattice && self.is_present(id)).then_some(id).into_iter().chain(self.parts_of_cell(id).map(move |k| lattice + k))
+    }
+
+    /// The squares of lattice cell `id` where viewers stand, in any of its view cells.
+    pub fn lattice_places(&self, id: usize) -> u64 {
+        self.view_cells_of(id).fold(0, |m, v| m | self.places_of(v))
+    }
+
     /// The indices in [`ViewGrid::parts`] of lattice cell `id`'s further parts.
     fn parts_of_cell(&self, id: usize) -> std::ops::Range<usize> {
         let first = self.parts.partition_point(|q| (q.cell as usize) < id);
@@ -342,9 +382,12 @@ impl ViewGrid {
     /// side of a wall. All 8 where none does (a part in the middle of its cell), so that every
     /// view cell has measured points.
     pub fn view_corners(&self, id: usize) -> Vec<usize> {
-        let c = self.cell_coords(id);
+        self.corners_next_to(self.cell_coords(id), self.places_of(id))
+    }
+
+    /// The corners of lattice cell `c` next to its squares `places` ([`ViewGrid::view_corners`]).
+    pub fn corners_next_to(&self, c: [u32; 3], places: u64) -> Vec<usize> {
         let all = self.cell_corners(c);
-        let places = self.places_of(id);
         let last = PLACES_PER_EDGE - 1;
         let kept: Vec<usize> = (0..8)
             .filter(|&i| places >> ((i >> 2 & 1) * last * PLACES_PER_EDGE + (i & 1) * last) & 1 == 1)
@@ -357,6 +400,13 @@ impl ViewGrid {
     /// eye height above floors, cut at walls), rather than a whole regular grid.
     pub fn where_viewers_stand(&self) -> bool {
         self.places.is_some()
+    }
+
+    /// Whether a precompute samples each lattice cell whole and refines what it sees into the
+    /// lattice cell's view cells (its quarters, cut at walls): in grids made where viewers
+    /// stand, whose view cells are quarters of lattice cells (decision 130).
+    pub fn refines_lattice_cells(&self) -> bool {
+        self.where_viewers_stand()
     }
 
     /// Whether cell `id` is a view cell.
@@ -633,6 +683,29 @@ mod tests {
         let mut g = cut_grid();
         g.parts[0].places = 0;
         assert!(g.check().is_err());
+    }
+
+    proptest::proptest! {
+        /// A footprint's quarter parts tile its places: each lies in one quarter, is one piece
+        /// that 4-neighbouring squares join, and none overlaps another; the box of a part holds
+        /// its squares.
+        #[test]
+        fn quarter_parts_tile_the_places(mask in proptest::prelude::any::<u64>()) {
+            let parts = quarter_parts(mask);
+            proptest::prop_assert_eq!(parts.iter().fold(0, |m, p| m | p), mask);
+            proptest::prop_assert_eq!(parts.iter().map(|p| p.count_ones()).sum::<u32>(), mask.count_ones());
+            let bounds = Aabb::new(Vec3::ZERO, Vec3::new(2.0, 1.0, 2.0));
+            for &p in &parts {
+                proptest::prop_assert!(QUARTERS.iter().any(|q| p & !q == 0), "{:x} spans quarters", p);
+                proptest::prop_assert_eq!(place_parts(p), vec![p]);
+                let cell = ViewCell { bounds, places: p };
+                let b = cell.places_box();
+                for k in 0..64u32 {
+                    let u = Vec3::new((k as f32 + 0.5) / 64.0, 0.5, ((k * 29 % 64) as f32 + 0.5) / 64.0);
+                    proptest::prop_assert!(b.contains_point(cell.point(u)));
+                }
+            }
+        }
     }
 
     #[test]

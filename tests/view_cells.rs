@@ -32,6 +32,23 @@ const SOLID_OR_AIR: [[f32; 3]; 4] = [[7.5, 1.6, 7.5], [2.0, 3.15, 2.0], [5.0, -0
 /// storeys and the partition.
 const IN_WALLS: [[f32; 3]; 4] = [[0.15, 1.5, 5.0], [5.0, 1.5, 2.0], [9.85, 4.8, 3.0], [3.0, 4.8, 0.12]];
 
+/// `scene` built at `dir` with the file's objects, R = 32 on the CPU and no floors, so that
+/// nothing but the samples counts; opened.
+fn build_without_floors(scene: &Scene, dir: &std::path::Path) -> Database {
+    let params = BuildParams {
+        objects: hdov::ObjectParts::File,
+        visibility: Some(VisibilityParams {
+            resolution: 32,
+            backend: BackendKind::Cpu,
+            zero_dov_floor: vec![],
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    hdov::build(scene, dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+    Database::open(dir).unwrap()
+}
+
 fn grid(scene: &Scene) -> hdov::ViewGrid {
     scene.view_grid(None, None, Some(2.0), EyeHeights::default()).unwrap()
 }
@@ -64,10 +81,12 @@ fn cells_are_where_people_stand_on_every_storey_and_not_in_solids() {
     let layer = |y: u32| g.present_ids().filter(|&id| id < g.lattice_count() && g.cell_coords(id)[1] == y).count();
     assert_eq!((0..g.dims[1]).map(layer).collect::<Vec<_>>(), vec![21, 0, 0, 25, 25, 0, 25, 25]);
     // The four ground-floor cells the partition runs through are cut into one view cell per
-    // room (the fifth has the door, which joins them), and no view cell spans a wall.
-    assert_eq!(scene.cells_across_walls(2.0, EyeHeights::default()).unwrap(), (4, 125));
+    // room (the fifth has the door, which joins them); every view cell is a quarter of its
+    // lattice cell or less, and none spans a wall.
+    assert_eq!(scene.cells_across_walls(2.0, EyeHeights::default()).unwrap(), (4, 484));
     for id in g.present_ids() {
         assert_eq!(hdov::grid::place_parts(g.places_of(id)).len(), 1, "view cell {id} spans a wall");
+        assert!(hdov::grid::QUARTERS.iter().any(|q| g.places_of(id) & !q == 0), "view cell {id} spans quarters");
     }
     for z in [1.0, 3.0, 7.0, 9.0] {
         let (west, east) = (Vec3::new(4.6, 1.5, z), Vec3::new(5.4, 1.5, z));
@@ -168,19 +187,7 @@ fn a_wall_through_a_cell_parts_its_answers() {
     assert_eq!(g.cell_of(e), Some(c), "both sides in one lattice cell");
     scene.grid = Some(g);
     let tmp = tempfile::tempdir().unwrap();
-    let params = BuildParams {
-        objects: hdov::ObjectParts::File,
-        visibility: Some(VisibilityParams {
-            resolution: 32,
-            backend: BackendKind::Cpu,
-            zero_dov_floor: vec![],
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    let dir = tmp.path().join("db");
-    hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
-    let db = Database::open(&dir).unwrap();
+    let db = build_without_floors(&scene, &tmp.path().join("db"));
     let (wc, ec) = (db.locate(w).unwrap(), db.locate(e).unwrap());
     assert!(wc.0 == ec.0 && wc.1 != ec.1, "{wc:?} {ec:?}");
     let naive = QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() };
@@ -189,4 +196,71 @@ fn a_wall_through_a_cell_parts_its_answers() {
     };
     assert!(sees(w, west) && !sees(w, east), "the west side sees the east room");
     assert!(sees(e, east) && !sees(e, west), "the east side sees the west room");
+}
+
+/// A view cell is a quarter of its lattice cell, and answers what is seen from it, not from the
+/// rest of the lattice cell: a box 30 m away, seen past the end of a tall wall 0.5 m beyond
+/// the cell from the half of the cell beyond x = 1 only, is in the answers of that half's two
+/// quarters and not of the other two (no floors, so that nothing but the samples counts).
+#[test]
+fn a_quarter_of_a_cell_answers_what_is_seen_from_it() {
+    let mut b = hdov_testkit::scenes::SceneBuilder::default();
+    let v = Vec3::new;
+    b.aabox(v(0.0, -0.3, 0.0), v(2.0, 0.0, 2.0));
+    b.aabox(v(-20.0, 0.0, 2.45), v(1.0, 10.0, 2.55));
+    let far = b.aabox(v(-0.5, 0.0, 30.0), v(0.5, 3.0, 31.0));
+    let mut scene = b.build();
+    let g = grid(&scene);
+    let quarters = [v(0.5, 1.5, 0.5), v(0.5, 1.5, 1.5), v(1.5, 1.5, 0.5), v(1.5, 1.5, 1.5)];
+    let c = g.cell_of(quarters[0]).unwrap();
+    assert!(quarters.iter().all(|&p| g.cell_of(p) == Some(c)), "one lattice cell");
+    assert_eq!(g.view_cells_of(g.cell_id(c)).count(), 4, "four quarters");
+    scene.grid = Some(g);
+    let tmp = tempfile::tempdir().unwrap();
+    let db = build_without_floors(&scene, &tmp.path().join("db"));
+    let naive = QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() };
+    let sees = |p: Vec3| db.query(p, &naive).unwrap().items.iter().any(|i| i.kind == ItemKind::Object && i.id == far);
+    let cells: Vec<_> = quarters.iter().map(|&p| db.locate(p).unwrap()).collect();
+    assert!(cells.windows(2).all(|w| w[0] != w[1]), "{cells:?}");
+    assert!(!sees(quarters[0]) && !sees(quarters[1]), "the wall hides the box from x < 1");
+    assert!(sees(quarters[2]) && sees(quarters[3]), "the box is seen past the wall's end from x > 1");
+}
+
+/// Cells where viewers stand (quarters, sides of walls) are sharded with their lattice cells:
+/// shards of the two-storey building, merged, equal its whole build file for file.
+#[test]
+fn shards_of_cells_where_viewers_stand_merge_into_the_whole() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut scene = hdov_testkit::scenes::two_storey_building();
+    scene.grid = Some(grid(&scene));
+    assert!(!scene.grid.as_ref().unwrap().parts.is_empty());
+    let build = |name: &str, visibility: Option<VisibilityParams>| {
+        let params = BuildParams { objects: hdov::ObjectParts::File, visibility, ..Default::default() };
+        let dir = tmp.path().join(name);
+        hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+        dir
+    };
+    let v = |shard| VisibilityParams { resolution: 16, backend: BackendKind::Cpu, shard, ..Default::default() };
+    let whole = build("whole", Some(v(None)));
+    let base = build("base", None);
+    let shards: Vec<_> =
+        (0..3).map(|i| build(&format!("shard{i}"), Some(v(Some(hdov::Shard::new(i, 3).unwrap()))))).collect();
+    let merged = tmp.path().join("merged");
+    hdov::merge(&base, &shards, &merged, Overwrite::Never).unwrap();
+    let names = |dir: &std::path::Path| {
+        let mut v: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        v.sort();
+        v
+    };
+    assert_eq!(names(&whole), names(&merged));
+    let layouts = names(&whole).into_iter().filter(|f| f.starts_with("vpages.")).count();
+    assert!(layouts >= 1, "{:?}", names(&whole));
+    for f in names(&whole).iter().filter(|f| *f != "manifest.json") {
+        assert!(std::fs::read(whole.join(f)).unwrap() == std::fs::read(merged.join(f)).unwrap(), "{f} differs");
+    }
+    assert_eq!(
+        Database::open(&merged).unwrap().info().unwrap().cells,
+        Database::open(&whole).unwrap().info().unwrap().cells
+    );
 }

@@ -136,17 +136,23 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
     };
     let mut in_order: Vec<&ShardDir> = dirs.iter().collect();
     in_order.sort_by_key(|s| s.shard.index);
+    // The lattice's cells shard by shard, then the further view cells of walls and quarters
+    // (`ViewGrid::parts`), which follow their lattice cells' order.
     let mut next = 0;
-    for s in in_order {
-        let range = s.shard.cells(&grid);
+    for (s, range) in in_order.iter().map(|s| (s, s.shard.cells(&grid))).chain(in_order.iter().map(|s| (s, s.shard.parts(&grid)))) {
         if range.start != next {
             return Err(Error::bad_file(&s.path, format!("starts at cell {}, not {next}", range.start)));
         }
         next = range.end;
+        if range.is_empty() {
+            continue;
+        }
         let layout = Layout::open(&s.path, s.layout, ReadMode::Mmap)?;
         for_each_cell(&layout, range.start as u32..range.end as u32, |_, pages| {
             writers.iter_mut().try_for_each(|w| w.push_cell(&pages)).map_err(Error::from)
         })?;
+    }
+    for s in &in_order {
         // Counts read from the shards' manifests: summed without wrapping.
         info.cells_computed = info.cells_computed.saturating_add(s.info.cells_computed);
         info.sample_points = info.sample_points.saturating_add(s.info.sample_points);

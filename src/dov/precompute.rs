@@ -223,14 +223,22 @@ pub fn precompute_shard(
     if shard.count == 0 || shard.index >= shard.count {
         return Err(Error::bad_param(Param::Shard, format!("{}/{} is not 0 ≤ I < N", shard.index, shard.count)));
     }
-    let cells: Vec<usize> = shard.cells(grid).filter(|&id| grid.is_present(id)).collect();
+    let cells: Vec<usize> = shard.cells(grid).chain(shard.parts(grid)).filter(|&id| grid.is_present(id)).collect();
     let mut samplers: Vec<Box<dyn CellSampler>> = options.samplers.iter().map(Sampling::sampler).collect();
     let ring = samplers.iter().map(|s| s.corner_ring()).chain([u32::from(options.uses_neighbours())]).max().unwrap_or(0);
     let corners_of = |coords: [u32; 3]| grid.neighbourhood_view_corners(coords, ring);
+    // What is sampled as one: each view cell, or where lattice cells are refined, each lattice
+    // cell's view cells together (the lattice cell's own id), refined into them after.
+    let split = grid.refines_lattice_cells();
+    let sites: Vec<(usize, Vec<usize>)> = if split {
+        cells.iter().filter(|&&id| id < grid.lattice_count()).map(|&id| (id, grid.view_cells_of(id).collect())).collect()
+    } else {
+        cells.iter().map(|&id| (id, vec![id])).collect()
+    };
     // How many shard cells still need each corner: drop a corner's DoV after its last cell.
     let mut corner_uses: HashMap<usize, u32> = HashMap::new();
-    for &id in &cells {
-        for c in corners_of(grid.cell_coords(id)) {
+    for (id, _) in &sites {
+        for c in corners_of(grid.cell_coords(*id)) {
             *corner_uses.entry(c).or_insert(0) += 1;
         }
     }
@@ -242,9 +250,10 @@ pub fn precompute_shard(
     let mut corner_dov: HashMap<usize, PointDov> = HashMap::new();
     let cube = backend.cube_map().clone();
     let mut out = ShardDov { cells: Vec::with_capacity(cells.len()), resolution: cube.resolution(), ..Default::default() };
-    for id in cells {
+    for (id, children) in sites {
         let coords = grid.cell_coords(id);
         let cell_box = grid.cell_box(coords);
+        let places = if split { grid.lattice_places(id) } else { grid.places_of(id) };
         let needed = corners_of(coords);
         for &corner in &needed {
             if let Entry::Vacant(slot) = corner_dov.entry(corner) {
@@ -252,7 +261,7 @@ pub fn precompute_shard(
                 tally.measured(false);
             }
         }
-        let own = grid.view_corners(id);
+        let own = grid.corners_next_to(coords, places);
         let own_dov: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).collect();
         let nearby_ids: Vec<usize> = needed.iter().copied().filter(|c| !own.contains(c)).collect();
         let nearby: Vec<&PointDov> = nearby_ids.iter().map(|c| &corner_dov[c]).collect();
@@ -261,7 +270,7 @@ pub fn precompute_shard(
             id,
             coords,
             bounds: cell_box,
-            places: grid.places_of(id),
+            places,
             grid,
             corners: &own_dov,
             nearby: &nearby,
@@ -298,7 +307,54 @@ pub fn precompute_shard(
         } else {
             Vec::new()
         };
-        out.cells.push((id as u32, cell_dov(&points, &around, &cell_box, object_bounds, shape, options, &cube)));
+        let whole = cell_dov(&points, &around, &cell_box, object_bounds, shape, options, &cube);
+        if !split {
+            out.cells.push((id as u32, whole));
+        } else {
+            // Each view cell sees what the whole sees from its own squares: its corners' views,
+            // the samplers' findings there, and what rays from its own points at the rest meet.
+            let seen_whole = seen_by(points.iter().copied());
+            let mut candidates: Vec<u32> = seen_whole.iter().copied().collect();
+            candidates.sort_unstable();
+            for child in children {
+                let child_places = grid.places_of(child);
+                let mut seen = seen_by(grid.view_corners(child).iter().map(|c| &corner_dov[c]));
+                // A sampler that cannot place its findings, or none (the corners alone: a
+                // quarter has 2 of them), leaves the view cell what the whole cell sees.
+                let mut placed = !samplers.is_empty();
+                for sampler in &mut samplers {
+                    match sampler.refine(backend, &site, child_places, &seen, &candidates, &mut tally)? {
+                        Some(more) => seen.extend(more),
+                        None => placed = false,
+                    }
+                }
+                if !placed {
+                    seen.extend(&seen_whole);
+                }
+                // A view cell that confirms most of what its lattice cell sees takes all of it:
+                // what it would leave out is little, and most likely what it sees through gaps
+                // too thin for its rays.
+                if seen.len() as f64 >= REFINED_TAKES_WHOLE * seen_whole.len() as f64 {
+                    seen.extend(&seen_whole);
+                }
+                let mut objects: Vec<(u32, f64)> = seen
+                    .into_iter()
+                    .map(|o| (o, f64::from(whole.object(o)).max(cube.texel_floor())))
+                    .collect();
+                objects.sort_unstable_by_key(|e| e.0);
+                let view = PointDov { resolution: cube.resolution(), objects, back_face: 0.0, empty: 0.0 };
+                let child_box = crate::grid::ViewCell { bounds: cell_box, places: child_places }.places_box();
+                let mut dov = cell_dov(&[&view], &around, &child_box, object_bounds, shape, options, &cube);
+                // A part of the cell sees no more of a node than the whole does.
+                for n in &mut dov.nodes {
+                    let (most, _) = whole.node(n.0);
+                    if most > 0.0 {
+                        n.1 = n.1.min(most.max(cube.texel_floor() as f32));
+                    }
+                }
+                out.cells.push((child as u32, dov));
+            }
+        }
         for corner in needed {
             let uses = corner_uses.get_mut(&corner).expect("every needed corner is counted");
             *uses -= 1;
@@ -307,12 +363,21 @@ pub fn precompute_shard(
             }
         }
     }
+    out.cells.sort_unstable_by_key(|c| c.0);
     out.points_measured = tally.done();
     out.probe_rays = tally.probe_rays;
     out.footprint_rays = tally.footprint_rays;
     out.region_views = tally.region_views;
     Ok(out)
 }
+
+/// A view cell refined from its lattice cell ([`ViewGrid::refines_lattice_cells`]) that sees at
+/// least this share of the objects its lattice cell's points see takes all of them. Measured on
+/// four game levels and a house in parts (decision 130): refining every view cell answered
+/// 0.47–0.55× the levels' PVS but the house's mean miss rose from 7.6e-7 to 4.5e-6 (thin
+/// rafters that only the lattice cell's other corners saw); at 0.8 the levels answer 0.49–0.59×
+/// at their unrefined misses and the house misses 1.2e-6; at 0.9, 0.55–0.57× and 2.6e-6.
+const REFINED_TAKES_WHOLE: f64 = 0.8;
 
 /// Combines the point DoVs of one cell's sample points into its [`CellDov`] (see the module
 /// documentation for the rules); `around` are the neighbouring cells' corners, used only by

@@ -69,8 +69,9 @@ impl std::str::FromStr for BackendKind {
     }
 }
 
-/// Part `index` of `count` of a grid's cells: the contiguous cell-id range
-/// `[index·C/count, (index+1)·C/count)`. Contiguous ranges keep most corners inside one shard.
+/// Part `index` of `count` of a grid's cells: a contiguous range of lattice cells holding about
+/// `1/count` of the view cells ([`Shard::cells`]), with the further view cells of those lattice
+/// cells ([`Shard::parts`]). Contiguous ranges keep most corners inside one shard.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(into = "[u32; 2]", try_from = "[u32; 2]")]
 pub struct Shard {
@@ -92,22 +93,32 @@ impl Shard {
         Ok(Shard { index, count })
     }
 
-    /// The cell ids of this shard: a range of ids holding its share of the view cells (the
-    /// shards' ranges tile the lattice, so that a merge appends them in order).
+    /// The lattice cell ids of this shard: a range holding its share of the lattice's view cells
+    /// (the shards' ranges tile the lattice, so that a merge appends them in order).
     pub fn cells(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
-        let n = grid.present_count() as u64;
+        let lattice = grid.lattice_count();
+        let n = grid.present.as_ref().map_or(lattice, crate::grid::CellSet::len) as u64;
         // Where shard k starts: at its first view cell, the first shard at 0, past the last at
         // the lattice's end.
         let start = |k: u32| -> usize {
             let p = n * u64::from(k) / u64::from(self.count);
             match k {
                 0 => 0,
-                _ if p >= n => grid.cell_count(),
-                _ => grid.present_ids().nth(p as usize).expect("p < the view cells"),
+                _ if p >= n => lattice,
+                _ => grid.present_ids().nth(p as usize).expect("p < the lattice's view cells"),
             }
         };
-        let end = if self.index + 1 == self.count { grid.cell_count() } else { start(self.index + 1) };
+        let end = if self.index + 1 == self.count { lattice } else { start(self.index + 1) };
         start(self.index)..end
+    }
+
+    /// The ids of the further view cells ([`ViewGrid::parts`]) of this shard's lattice cells: a
+    /// range after the lattice. Parts are in their lattice cells' order, so these ranges tile
+    /// the parts in shard order, and a lattice cell's view cells are measured by one shard.
+    pub fn parts(&self, grid: &ViewGrid) -> std::ops::Range<usize> {
+        let (lattice, cells) = (grid.lattice_count(), self.cells(grid));
+        let at = |id: usize| lattice + grid.parts.partition_point(|p| (p.cell as usize) < id);
+        at(cells.start)..at(cells.end)
     }
 }
 

@@ -22,7 +22,7 @@ use glam::Vec3;
 use super::Scene;
 use crate::error::{Error, Param, Result};
 use crate::geom::Aabb;
-use crate::grid::{CellPart, CellSet, ViewGrid, place_parts};
+use crate::grid::{CellPart, CellSet, ViewGrid, place_parts, quarter_parts};
 
 /// Vertical lines per cell edge (8 × 8 per cell column): floors narrower than an eighth of a cell
 /// (a ledge, a step's nose) may go unseen.
@@ -233,7 +233,7 @@ impl Scene {
         // or a drop through it) is one view cell per part, so that no answer mixes two rooms.
         let mut own = Vec::with_capacity(places.len());
         for (&id, &mask) in &places {
-            let mut parts = place_parts(mask).into_iter();
+            let mut parts = quarter_parts(mask).into_iter();
             own.push(parts.next().expect("a cell in the map has a place"));
             grid.parts.extend(parts.map(|places| CellPart { cell: id as u32, places }));
         }
@@ -247,12 +247,12 @@ impl Scene {
     }
 
     /// Of the lattice cells [`Scene::standable_grid`] finds places in, how many a wall cuts into
-    /// several view cells. Returns (such cells, view cells).
+    /// parts that no line between them joins. Returns (such cells, view cells).
     pub fn cells_across_walls(&self, cell_size: f32, eyes: EyeHeights) -> Result<(usize, usize)> {
         let grid = self.standable_grid(cell_size, eyes)?;
-        let mut cut: Vec<u32> = grid.parts.iter().map(|p| p.cell).collect();
-        cut.dedup();
-        Ok((cut.len(), grid.present_count()))
+        let lattice = grid.present_ids().filter(|&id| id < grid.lattice_count());
+        let cut = lattice.filter(|&id| place_parts(grid.lattice_places(id)).len() > 1).count();
+        Ok((cut, grid.present_count()))
     }
 
     /// Where each vertical line of the lattice `origin + (i + ½, ·, k + ½) · spacing`,

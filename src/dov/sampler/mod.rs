@@ -115,6 +115,22 @@ pub trait CellSampler {
     /// measured for the cell.
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()>;
 
+    /// What the cell it sampled last (`cell`) sees from some of its squares, `places`, beyond
+    /// `seen` (what their corners see): its findings placed there, and what rays from points
+    /// there aimed at `candidates` (what the whole cell sees) meet first. `None`: its findings
+    /// have no place, and the squares take the whole cell's.
+    fn refine(
+        &mut self,
+        _backend: &mut dyn DovBackend,
+        _cell: &CellSite,
+        _places: u64,
+        _seen: &std::collections::HashSet<u32>,
+        _candidates: &[u32],
+        _tally: &mut Tally,
+    ) -> Result<Option<std::collections::HashSet<u32>>> {
+        Ok(None)
+    }
+
     /// The objects it found from cell `cell` by itself (during [`CellSampler::prepare`]), which
     /// the neighbours floor counts as seen nearby; `None`: it keeps no such finds.
     fn found_from(&self, _cell: usize) -> Option<Vec<u32>> {
