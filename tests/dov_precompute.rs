@@ -1,7 +1,9 @@
 //! From-region DoV over a view grid: shared corners, max of sums, NVO, zero-DoV floor, shards.
 
 use glam::Vec3;
-use hdov::dov::precompute::{CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, cell_dov, precompute_shard};
+use hdov::dov::precompute::{
+    CellContext, CellDov, FloorTest, PrecomputeOptions, Shard, TreeShape, cell_dov, part_dov, precompute_shard,
+};
 use hdov::dov::{CpuBackend, CubeMap, DovBackend, IdCube, PointDov};
 use hdov::geom::Aabb;
 use hdov::grid::ViewGrid;
@@ -314,4 +316,43 @@ impl hdov::progress::Report for Calls {
     fn set(&self, done: u64, total: u64) {
         self.0.lock().unwrap().push((done as usize, total as usize));
     }
+}
+
+/// A part of a cell (a view cell refined from its lattice cell) answers what it sees at the
+/// whole cell's DoVs, never a node above the whole's DoV, what the whole did not see at the
+/// one-texel floor, and the box floor of its own box, not the whole cell's.
+#[test]
+fn a_part_of_a_cell_sees_no_more_than_the_whole() {
+    // Objects 0–2 under leaf 1, object 3 under leaf 2; both leaves under the root 0.
+    let shape =
+        TreeShape { object_leaf: vec![1, 1, 1, 2], node_parent: vec![None, Some(0), Some(0)], ..Default::default() };
+    let point = |objects: Vec<(u32, f64)>| PointDov { resolution: 64, objects, back_face: 0.0, empty: 0.0 };
+    let points = [point(vec![(0, 0.30), (1, 0.05)]), point(vec![(0, 0.05), (1, 0.30)])];
+    let points: Vec<&PointDov> = points.iter().collect();
+    let far = Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0));
+    // Object 2 meets the whole cell's box but not the part's; object 3 meets the part's.
+    let bounds =
+        vec![far, far, Aabb::new(Vec3::new(0.8, 0.0, 0.8), Vec3::ONE), Aabb::new(Vec3::ZERO, Vec3::splat(0.2))];
+    let (cell, part) = (Aabb::new(Vec3::ZERO, Vec3::ONE), Aabb::new(Vec3::ZERO, Vec3::new(0.5, 1.0, 0.5)));
+    let cube = CubeMap::new(64);
+    let no_floor = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
+    let whole = cell_dov(&points, &[], &cell, &bounds, &shape, &no_floor, &cube);
+    assert!((whole.node(1).0 - 0.35).abs() < 1e-6);
+    let context = |options| CellContext { around: &[], object_bounds: &bounds, shape: &shape, options, cube: &cube };
+    let seen = |objects: &[u32]| objects.iter().copied().collect::<std::collections::HashSet<u32>>();
+
+    let one = part_dov(&seen(&[0]), &whole, &part, &context(&no_floor));
+    assert_eq!(one.objects, vec![(0, 0.30)]);
+    assert!((one.node(1).0 - 0.30).abs() < 1e-6 && one.node(1).1 == 1);
+    // Both seen: their sum (0.60) is more than the whole saw of their leaf at any point.
+    let both = part_dov(&seen(&[0, 1]), &whole, &part, &context(&no_floor));
+    assert!((both.node(1).0 - 0.35).abs() < 1e-6 && both.node(1).1 == 2, "{:?}", both.node(1));
+    // What the whole did not see (a ray from the part met it) is visible at the floor.
+    let floor = cube.texel_floor() as f32;
+    assert_eq!(part_dov(&seen(&[3]), &whole, &part, &context(&no_floor)).objects, vec![(3, floor)]);
+    // The box floor takes what meets the part's box, not what meets the whole cell's only.
+    let boxed = PrecomputeOptions { zero_dov_tests: vec![FloorTest::BoxWithin(0.0)], ..Default::default() };
+    let floored = part_dov(&seen(&[0]), &whole, &part, &context(&boxed));
+    assert_eq!(floored.objects, vec![(0, 0.30), (3, floor)]);
+    assert_eq!(floored.floored, 1);
 }

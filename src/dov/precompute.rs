@@ -337,22 +337,9 @@ pub fn precompute_shard(
                 if seen.len() as f64 >= REFINED_TAKES_WHOLE * seen_whole.len() as f64 {
                     seen.extend(&seen_whole);
                 }
-                let mut objects: Vec<(u32, f64)> = seen
-                    .into_iter()
-                    .map(|o| (o, f64::from(whole.object(o)).max(cube.texel_floor())))
-                    .collect();
-                objects.sort_unstable_by_key(|e| e.0);
-                let view = PointDov { resolution: cube.resolution(), objects, back_face: 0.0, empty: 0.0 };
-                let child_box = crate::grid::ViewCell { bounds: cell_box, places: child_places }.places_box();
-                let mut dov = cell_dov(&[&view], &around, &child_box, object_bounds, shape, options, &cube);
-                // A part of the cell sees no more of a node than the whole does.
-                for n in &mut dov.nodes {
-                    let (most, _) = whole.node(n.0);
-                    if most > 0.0 {
-                        n.1 = n.1.min(most.max(cube.texel_floor() as f32));
-                    }
-                }
-                out.cells.push((child as u32, dov));
+                let part = crate::grid::ViewCell { bounds: cell_box, places: child_places }.places_box();
+                let context = CellContext { around: &around, object_bounds, shape, options, cube: &cube };
+                out.cells.push((child as u32, part_dov(&seen, &whole, &part, &context)));
             }
         }
         for corner in needed {
@@ -378,6 +365,36 @@ pub fn precompute_shard(
 /// rafters that only the lattice cell's other corners saw); at 0.8 the levels answer 0.49–0.59×
 /// at their unrefined misses and the house misses 1.2e-6; at 0.9, 0.55–0.57× and 2.6e-6.
 const REFINED_TAKES_WHOLE: f64 = 0.8;
+
+/// What combining a cell's views takes besides the views ([`cell_dov`], [`part_dov`]).
+pub struct CellContext<'a> {
+    /// The neighbouring cells' corners and finds, for [`FloorTest::NeighbourCorners`].
+    pub around: &'a [&'a PointDov],
+    pub object_bounds: &'a [Aabb],
+    pub shape: &'a TreeShape,
+    pub options: &'a PrecomputeOptions,
+    pub cube: &'a CubeMap,
+}
+
+/// The [`CellDov`] of a part of a cell (a view cell refined from its lattice cell), box `part`,
+/// that sees `seen`, from the whole cell's `whole`: each object seen at the whole's DoV (at
+/// least the one-texel floor, for what the whole did not see), the floors of the part's own box
+/// and sight, and no node above the whole's DoV (or the floor): a part of a cell sees no more
+/// of an object or a node than the whole does.
+pub fn part_dov(seen: &HashSet<u32>, whole: &CellDov, part: &Aabb, c: &CellContext) -> CellDov {
+    let floor = c.cube.texel_floor();
+    let mut objects: Vec<(u32, f64)> = seen.iter().map(|&o| (o, f64::from(whole.object(o)).max(floor))).collect();
+    objects.sort_unstable_by_key(|e| e.0);
+    let view = PointDov { resolution: c.cube.resolution(), objects, back_face: 0.0, empty: 0.0 };
+    let mut dov = cell_dov(&[&view], c.around, part, c.object_bounds, c.shape, c.options, c.cube);
+    for n in &mut dov.nodes {
+        let (most, _) = whole.node(n.0);
+        if most > 0.0 {
+            n.1 = n.1.min(most.max(floor as f32));
+        }
+    }
+    dov
+}
 
 /// Combines the point DoVs of one cell's sample points into its [`CellDov`] (see the module
 /// documentation for the rules); `around` are the neighbouring cells' corners, used only by
