@@ -412,9 +412,10 @@ fn print_cells(db: &Database, json: bool) -> Result<()> {
     let mut out = std::io::stdout().lock();
     for id in grid.present_ids() {
         let cell = grid.cell_coords(id);
-        let b = grid.cell_box(cell);
-        // Where in the box viewers stand: bit z·8 + x of its 8 × 8 squares (hex; the parts of a
-        // cell that a wall cuts share the box and differ here).
+        // The box of the squares where its viewers stand (a quarter of its lattice cell, or
+        // less where a wall cuts it), and those squares: bit z·8 + x of the lattice cell's
+        // 8 × 8 (hex).
+        let b = grid.view_cell(id).places_box();
         let places = format!("{:016x}", grid.places_of(id));
         let line = if json {
             serde_json::json!({ "id": id, "cell": cell, "min": b.min.to_array(), "max": b.max.to_array(), "places": places })

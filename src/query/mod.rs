@@ -345,7 +345,9 @@ impl Database {
         let (cell, cell_id) = self.locate(at)?;
         access.reset_io();
         access.flip(cell_id)?;
-        let cell_box = self.grid().map_or(Aabb::new(at, at), |g| g.cell_box(cell));
+        // Where a viewer of this view cell can be: the box of its places (its lattice cell's box
+        // where viewers stand anywhere in it).
+        let cell_box = self.grid().map_or(Aabb::new(at, at), |g| g.view_cell(cell_id as usize).places_box());
         let mut out = traverse::run(self, access, at, cell_box, params, cull)?;
         if let Some(cam) = params.camera.as_ref().filter(|_| cull) {
             let frustum = cam.frustum(at);
