@@ -1,8 +1,9 @@
 //! The viewing-cell grid: a box region cut into nx × ny × nz cells (y is height), every one of
 //! them a view cell, or only those of a [`CellSet`] (the places a viewer can stand, found from
-//! the geometry by `scene::standable`): the lattice then only numbers the cells. A lattice cell
-//! that a wall cuts is several view cells, one per side ([`ViewGrid::parts`]): the first keeps
-//! the lattice id, the others are numbered after the lattice.
+//! the geometry by `scene::standable`): the lattice then only numbers the cells. Such a lattice
+//! cell is several view cells, its quarters, each cut at walls ([`ViewGrid::parts`],
+//! [`quarter_parts`]): the first keeps the lattice id, the others are numbered after the
+//! lattice.
 //!
 //! Sample points are the cell corners, shared between neighbouring cells: a grid of nx × ny × nz
 //! cells has (nx+1)(ny+1)(nz+1) corners, each measured once.

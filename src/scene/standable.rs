@@ -13,9 +13,9 @@
 //! [`ViewGrid::places`]) around the line, and the places around it that are open air from the
 //! floor up to the highest eye (a viewer at the edge of a hole or a drop leans over it; a wall
 //! standing on the floor is not open). Layers of cells are at most the lowest eye height tall, so
-//! that a cell marked from a floor never reaches below it into the storey underneath. A cell
-//! whose places fall in parts that no place joins (a wall through it) is one view cell per
-//! part ([`ViewGrid::parts`]): no answer mixes two rooms.
+//! that a cell marked from a floor never reaches below it into the storey underneath. A cell is
+//! answered in quarters, and a quarter whose places fall in parts that no place joins (a wall
+//! through it) is one view cell per part ([`ViewGrid::parts`]): no answer mixes two rooms.
 
 use glam::Vec3;
 
@@ -229,8 +229,9 @@ impl Scene {
                 }
             }
         }
-        // A cell whose places fall in parts that no line between them joins (a wall, a pillar
-        // or a drop through it) is one view cell per part, so that no answer mixes two rooms.
+        // Each cell's quarters (decision 130), and of a quarter whose places fall in parts that
+        // no line between them joins (a wall, a pillar or a drop through it) each part, are view
+        // cells, so that no answer mixes two rooms.
         let mut own = Vec::with_capacity(places.len());
         for (&id, &mask) in &places {
             let mut parts = quarter_parts(mask).into_iter();
