@@ -324,7 +324,7 @@ pub fn precompute_shard(
                 let mut placed = !samplers.is_empty();
                 for sampler in &mut samplers {
                     match sampler.refine(backend, &site, child_places, &seen, &candidates, &mut tally)? {
-                        Some(more) => seen.extend(more),
+                        Some(refined) => seen = refined,
                         None => placed = false,
                     }
                 }

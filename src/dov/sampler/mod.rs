@@ -12,7 +12,7 @@ mod interior;
 mod probe;
 
 pub use adaptive::sample_cell;
-pub use probe::{Candidate, CellProbe, Leads, probe_cell, region_finds};
+pub use probe::{Candidate, CellProbe, Leads, RegionFind, probe_cell, region_finds};
 
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::Result;
@@ -115,9 +115,9 @@ pub trait CellSampler {
     /// measured for the cell.
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()>;
 
-    /// What the cell it sampled last (`cell`) sees from some of its squares, `places`, beyond
-    /// `seen` (what their corners see): its findings placed there, and what rays from points
-    /// there aimed at `candidates` (what the whole cell sees) meet first. `None`: its findings
+    /// What the cell it sampled last (`cell`) sees from some of its squares, `places`: `seen`
+    /// (what their corners see), its findings placed there, and what rays from points there
+    /// aimed at `candidates` (what the whole cell sees) meet first. `None`: its findings
     /// have no place, and the squares take the whole cell's.
     fn refine(
         &mut self,

@@ -210,8 +210,17 @@ pub struct Leads<'a> {
     pub seen: &'a std::collections::HashSet<u32>,
     /// The objects to probe.
     pub candidates: &'a [Candidate],
-    /// What the cell's own region rays met ([`region_finds`]).
-    pub region: &'a [(u32, Vec3)],
+    /// What the cell's own region rays met.
+    pub region: &'a [RegionFind],
+}
+
+/// An object that a cell's region (or border) rays met: with the origin of the first ray that
+/// met it, and the squares of the cell ([`ViewCell::square_of`]) whose rays met it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegionFind {
+    pub object: u32,
+    pub origin: Vec3,
+    pub squares: u64,
 }
 
 /// Probes the cell `cell` (see the module documentation) from `leads`; `bounds`: every object's
@@ -230,7 +239,7 @@ pub fn probe_cell(
     let aim = Aim { rays, points: &points, outside: &outside, per_point: probing.rays as usize, nearest: probing.nearest as usize };
     let mut cast = 26 * points.len() as u64;
     // What the cell's own region rays met is seen from the cell: no need to search for it.
-    let settled: HashSet<u32> = region.iter().map(|f| f.0).filter(|o| !seen.contains(o)).collect();
+    let settled: HashSet<u32> = region.iter().map(|f| f.object).filter(|o| !seen.contains(o)).collect();
     // The unseen objects the candidates' rays meet first, candidates included, each with the
     // point that met it first.
     let (mut found, n) = aim.search(candidates, seen, &settled);
@@ -240,7 +249,7 @@ pub fn probe_cell(
     // And what the region's rays met that nothing else found, with their origin.
     let by_region: Vec<(u32, Vec3)> = region
         .iter()
-        .copied()
+        .map(|f| (f.object, f.origin))
         .filter(|&(o, _)| !seen.contains(&o) && found.binary_search_by_key(&o, |f| f.0).is_err())
         .collect();
     // A found object's DoV is taken at the probe point whose rays meet it most (the likeliest to
@@ -388,9 +397,9 @@ fn region_views_met(cell: &ViewCell, views: &RegionViews, ids: &[u32]) -> Vec<Me
 /// adaptive border sampling of guided visibility sampling, Wonka et al. 2006). A gap that one
 /// ray went through is seen from that origin, and what lies beside the ray's hit (the rest of a
 /// wall behind a doorway, the floor beyond a ledge) is seen through it too, where a ray from
-/// anywhere else in the cell rarely passes. Returns the finds in object order, with the squares
-/// of `cell` that the rays which met each came from, and the border rays cast.
-fn border_finds(caster: &dyn RayCaster, cell: &ViewCell, met: Vec<Met>, budget: u64) -> (Vec<(u32, Vec3)>, Vec<u64>, u64) {
+/// anywhere else in the cell rarely passes. Returns the finds in object order and the border
+/// rays cast.
+fn border_finds(caster: &dyn RayCaster, cell: &ViewCell, met: Vec<Met>, budget: u64) -> (Vec<RegionFind>, u64) {
     // Rays beside an object that many rays met would find what those rays found around it.
     let mut frontier: Vec<(u32, (Vec3, Vec3))> =
         met.iter().filter(|m| m.2 <= BORDER_RARE_HITS).map(|&(id, ray, _, _)| (id, ray)).collect();
@@ -438,10 +447,10 @@ fn border_finds(caster: &dyn RayCaster, cell: &ViewCell, met: Vec<Met>, budget: 
         }
         frontier = next;
     }
-    let mut met: Vec<(u32, Vec3, u64)> =
-        found.into_iter().map(|(id, ((origin, _), squares))| (id, origin, squares)).collect();
-    met.sort_unstable_by_key(|m| m.0);
-    (met.iter().map(|m| (m.0, m.1)).collect(), met.iter().map(|m| m.2).collect(), cast)
+    let mut met: Vec<RegionFind> =
+        found.into_iter().map(|(object, ((origin, _), squares))| RegionFind { object, origin, squares }).collect();
+    met.sort_unstable_by_key(|m| m.object);
+    (met, cast)
 }
 
 /// Finds met by at most this many region rays get border rays: seen from little of the cell or
@@ -610,16 +619,14 @@ pub struct Probe {
     probing: RayProbing,
     /// What each cell's region rays met ([`region_finds`]), by cell id (by lattice cell where the
     /// precompute refines, [`ViewGrid::refines_lattice_cells`]).
-    region: HashMap<usize, Vec<(u32, Vec3)>>,
-    /// The squares of its cell that the rays which met each of `region` came from.
-    region_squares: HashMap<usize, Vec<u64>>,
+    region: HashMap<usize, Vec<RegionFind>>,
     /// The cell sampled last: where its probe findings were measured from, and what each saw.
     placed: Vec<(Vec3, Vec<u32>)>,
 }
 
 impl Probe {
     pub fn new(probing: RayProbing) -> Self {
-        Probe { probing, region: HashMap::new(), region_squares: HashMap::new(), placed: Vec::new() }
+        Probe { probing, region: HashMap::new(), placed: Vec::new() }
     }
 
     /// The objects that the region rays of the cells within [`REGION_RING`] of `cell` (itself
@@ -647,7 +654,7 @@ impl Probe {
             }
             let mut finds: Vec<(u32, Vec3)> = ring
                 .iter()
-                .flat_map(|n| self.region.get(n).into_iter().flatten().copied())
+                .flat_map(|n| self.region.get(n).into_iter().flatten().map(|f| (f.object, f.origin)))
                 .filter(|(o, _)| !seen.contains(o) && !candidates.contains_key(o))
                 .collect();
             finds.sort_by_key(|f| f.0);
@@ -732,14 +739,14 @@ impl CellSampler for Probe {
                         region_rays_met(backend.ray_caster().expect("checked above"), &cell, &sequence)
                     }
                 };
-                let (finds, squares, border) = border_finds(backend.ray_caster().expect("checked above"), &cell, met, budget);
+                let (finds, border) = border_finds(backend.ray_caster().expect("checked above"), &cell, met, budget);
                 tally.probe_rays += border;
-                for (f, sq) in finds.into_iter().zip(squares) {
-                    union.entry(f.0).or_insert((f.1, 0)).1 |= sq;
+                for f in finds {
+                    union.entry(f.object).or_insert((f.origin, 0)).1 |= f.squares;
                 }
             }
-            self.region.insert(id, union.iter().map(|(&o, &(at, _))| (o, at)).collect());
-            self.region_squares.insert(id, union.values().map(|v| v.1).collect());
+            let finds = union.into_iter().map(|(object, (origin, squares))| RegionFind { object, origin, squares });
+            self.region.insert(id, finds.collect());
         }
         Ok(())
     }
@@ -791,8 +798,8 @@ impl CellSampler for Probe {
                 found.extend(objects);
             }
         }
-        if let (Some(finds), Some(squares)) = (self.region.get(&cell.id), self.region_squares.get(&cell.id)) {
-            found.extend(finds.iter().zip(squares).filter(|(_, s)| *s & places != 0).map(|(f, _)| f.0));
+        if let Some(finds) = self.region.get(&cell.id) {
+            found.extend(finds.iter().filter(|f| f.squares & places != 0).map(|f| f.object));
         }
         let left: Vec<Candidate> = candidates
             .iter()
@@ -817,7 +824,7 @@ impl CellSampler for Probe {
     }
 
     fn found_from(&self, cell: usize) -> Option<Vec<u32>> {
-        self.region.get(&cell).map(|finds| finds.iter().map(|f| f.0).collect())
+        self.region.get(&cell).map(|finds| finds.iter().map(|f| f.object).collect())
     }
 }
 
