@@ -231,15 +231,29 @@ fn routes_answer_what_the_library_answers() {
     // /tiles/ serves what `hdov export --3dtiles` writes, byte for byte, and nothing else.
     let exported = tmp.path().join("tiles");
     hdov::tiles::write_tileset(&db, &exported, None, &hdov::Progress::hidden()).unwrap();
-    let set: Value = serde_json::from_slice(&std::fs::read(exported.join("tileset.json")).unwrap()).unwrap();
-    let content = set["root"]["content"]["uri"].as_str().unwrap().to_string();
-    for file in ["tileset.json".to_string(), "visibility/index.json".into(), content, hdov::tiles::cell_file(3)] {
+    let first = |folder: &str| {
+        let mut names: Vec<String> = std::fs::read_dir(exported.join(folder))
+            .unwrap()
+            .map(|e| format!("{folder}/{}", e.unwrap().file_name().to_string_lossy()))
+            .collect();
+        names.sort();
+        names.swap_remove(0)
+    };
+    let (subtree, content) = (first("subtrees"), first("content"));
+    for file in
+        ["tileset.json".to_string(), "visibility/index.json".into(), subtree, content, hdov::tiles::cell_file(3)]
+    {
         let r = get(addr, &format!("/tiles/{file}"));
         assert_eq!(r.status, 200, "{file}");
         assert_eq!(r.body, std::fs::read(exported.join(&file)).unwrap(), "{file}");
     }
     let cells = db.grid().unwrap().cell_count();
-    for wrong in ["/tiles/content/n0-99.glb", "/tiles/visibility/cells/03.bin", "/tiles/../manifest.json"] {
+    for wrong in [
+        "/tiles/content/n0-99-0.glb",
+        "/tiles/subtrees/n0.json",
+        "/tiles/visibility/cells/03.bin",
+        "/tiles/../manifest.json",
+    ] {
         assert_eq!(get(addr, wrong).status, 404, "{wrong}");
     }
     assert_eq!(get(addr, &format!("/tiles/visibility/cells/{cells}.bin")).status, 404);
@@ -446,7 +460,9 @@ fn the_tiles_plugin_never_requests_what_the_cell_cannot_see() {
     let db_dir = tiny_city(tmp.path());
     let db = Database::open(&db_dir).unwrap();
     let server = Server::start(&db_dir, &[]);
-    let set = get(server.addr, "/tiles/tileset.json").json();
+    let set = hdov_testkit::tiles::resolved(&get(server.addr, "/tiles/tileset.json").json(), &mut |p| {
+        get(server.addr, &format!("/tiles/{p}")).json()
+    });
     let nodes = u64::from(db.node_count());
     let grid = db.grid().unwrap();
     let (mut fewer, mut hidden) = (0, 0);
@@ -477,7 +493,12 @@ fn the_tiles_plugin_never_requests_what_the_cell_cannot_see() {
         while let Some((tile, under_stop)) = stack.pop() {
             let h = &tile["extras"]["hdov"];
             let key = h["node"].as_u64().unwrap_or_else(|| nodes + h["object"].as_u64().unwrap());
-            if !seen.contains_key(&key) || under_stop {
+            // A slice of a node's level is the cell's where it sees one of its entries.
+            let visible = match h["entries"].as_array() {
+                Some(entries) => entries.iter().any(|k| seen.contains_key(&k.as_u64().unwrap())),
+                None => seen.contains_key(&key),
+            };
+            if !visible || under_stop {
                 continue;
             }
             if let Some(uri) = tile["content"]["uri"].as_str() {

@@ -12,6 +12,12 @@ use hdov::tiles::{self, Y_UP_TO_Z_UP};
 use hdov::{Database, ItemKind, QueryParams, Scene};
 use serde_json::Value;
 
+/// The export's `tileset.json` with its subtree tilesets in place (content URIs relative to `out`).
+fn tileset(out: &Path) -> Value {
+    let read = |p: &str| -> Value { serde_json::from_slice(&std::fs::read(out.join(p)).unwrap()).unwrap() };
+    hdov_testkit::tiles::resolved(&read("tileset.json"), &mut |p| read(p))
+}
+
 fn export(dir: &Path) -> (Scene, Database, std::path::PathBuf) {
     let (scene, db) = hdov_testkit::scenes::tiny_city_database(dir);
     let db = Database::open(&db).unwrap();
@@ -47,7 +53,7 @@ fn in_box(p: Vec3, b: &[f32]) -> bool {
 fn the_tileset_gives_back_every_object_and_keeps_the_error_contract() {
     let tmp = tempfile::tempdir().unwrap();
     let (scene, db, out) = export(tmp.path());
-    let set: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+    let set = tileset(&out);
     assert_eq!(set["asset"]["version"], "1.1");
     assert_eq!(set["root"]["refine"], "REPLACE");
     let mut all = Vec::new();
@@ -139,6 +145,58 @@ fn the_tileset_gives_back_every_object_and_keeps_the_error_contract() {
         None => hdov_testkit::testdata::skip_for_want_of("glTF-Validator (node, npm gltf-validator)"),
     }
     let _ = db;
+}
+
+/// A node's level comes in slices, one per set of entries its triangles stand for
+/// (decision 131): together they hold the level's triangles once each, and a slice's vertices lie
+/// in the boxes of the entries it names, so a client that draws the slices of the entries a cell
+/// sees leaves out only what stands for hidden ones.
+#[test]
+fn node_levels_come_in_slices_by_the_entries_they_stand_for() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, db, out) = export(tmp.path());
+    let mut all = Vec::new();
+    tiles(&tileset(&out)["root"], Mat4::IDENTITY, &mut all);
+    let nodes = u64::from(db.node_count());
+    let back = Y_UP_TO_Z_UP.inverse();
+    let mut faces: HashMap<(u64, u64), usize> = HashMap::new();
+    let mut single = 0;
+    for (tile, _) in &all {
+        let h = &tile["extras"]["hdov"];
+        let (Some(entries), Some(uri)) = (h["entries"].as_array(), tile["content"]["uri"].as_str()) else { continue };
+        let (n, level) = (h["node"].as_u64().unwrap(), h["level"].as_u64().unwrap());
+        let page = db.node(n as u32).unwrap();
+        let key = |child: u32| if page.node.is_leaf() { nodes + u64::from(child) } else { u64::from(child) };
+        let boxes: Vec<hdov::Aabb> = entries
+            .iter()
+            .map(|k| {
+                page.node
+                    .entries
+                    .iter()
+                    .find(|e| key(e.child) == k.as_u64().unwrap())
+                    .expect("an entry of the node")
+                    .mbr
+            })
+            .collect();
+        single += usize::from(boxes.len() == 1);
+        let tris = content_triangles(&out.join(uri));
+        // Triangles as written (a scene load drops degenerate ones): the index accessor's count.
+        let glb = std::fs::read(out.join(uri)).unwrap();
+        let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+        let doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+        *faces.entry((n, level)).or_default() += doc["accessors"][1]["count"].as_u64().unwrap() as usize / 3;
+        for p in tris.iter().flatten().map(|&p| back.transform_point3(p)) {
+            let pad = 1e-4 * (1.0 + p.abs().max_element());
+            assert!(
+                boxes.iter().any(|b| (p - b.min).min_element() >= -pad && (b.max - p).min_element() >= -pad),
+                "node {n} level {level}: {p} in none of its entries' boxes {entries:?}"
+            );
+        }
+    }
+    assert!(single > 0 && !faces.is_empty());
+    for ((n, level), count) in faces {
+        assert_eq!(count, db.catalog().node_lods[n as usize][level as usize].faces as usize, "node {n} level {level}");
+    }
 }
 
 #[test]
@@ -236,7 +294,7 @@ fn loaders_gl_reads_the_tileset_and_finds_each_box_holds_its_content() {
     let report = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "{report}{}", String::from_utf8_lossy(&run.stderr));
     let r: Value = serde_json::from_str(report.trim()).unwrap();
-    let set: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+    let set = tileset(&out);
     let mut all = Vec::new();
     tiles(&set["root"], Mat4::IDENTITY, &mut all);
     assert_eq!(r["tiles"].as_u64().unwrap() as usize, all.len(), "loaders.gl reads every tile");
@@ -259,7 +317,7 @@ fn a_database_without_visibility_is_a_tileset_alone() {
     let report = hdov::tiles::write_tileset(&db, &out, None, &hdov::Progress::hidden()).unwrap();
     assert_eq!((report.cells, report.visibility_bytes), (0, 0));
     assert!(!out.join("visibility").exists());
-    let set: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+    let set = tileset(&out);
     assert!(set["extras"]["hdov"]["visibility"].is_null());
     let mut all = Vec::new();
     tiles(&set["root"], Mat4::IDENTITY, &mut all);

@@ -251,11 +251,12 @@ pub fn export(a: ExportArgs) -> Result<()> {
     if let Some(dir) = &a.tiles {
         let r = hdov::tiles::write_tileset(&db, dir, a.root_transform, &Progress::for_terminal(a.quiet))?;
         println!(
-            "{}: {} tiles, {} content files ({:.1} MB), tileset.json {:.1} kB, visibility of {} cells {:.1} kB ({:.2} % of the content)",
+            "{}: {} tiles, {} content files ({:.1} MB), tileset.json and {} subtree tilesets {:.1} kB, visibility of {} cells {:.1} kB ({:.2} % of the content)",
             dir.display(),
             r.tiles,
             r.contents,
             r.content_bytes as f64 / 1e6,
+            r.subtrees,
             r.tileset_bytes as f64 / 1e3,
             r.cells,
             r.visibility_bytes as f64 / 1e3,

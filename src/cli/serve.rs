@@ -431,7 +431,7 @@ async fn mesh(State(s): State<Arc<Served>>, Path(name): Path<String>, headers: H
     Ok((cache, [(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response())
 }
 
-/// `/tiles/PATH`: the file PATH of the 3D Tiles export (`tileset.json`, `content/…`,
+/// `/tiles/PATH`: the file PATH of the 3D Tiles export (`tileset.json`, `subtrees/…`, `content/…`,
 /// `visibility/index.json`, `visibility/cells/{id}.bin`), made from the database as the export
 /// makes it. Only names the tileset lists are served.
 async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Result<Response, Reply> {
@@ -444,8 +444,11 @@ async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Re
         if let Some(index) = t.index_json.as_ref().filter(|_| path == hdov::tiles::VISIBILITY_INDEX) {
             return Ok(file("application/json", index.clone()));
         }
-        if let Some(lod) = t.set.contents.get(&path) {
-            return Ok(file("model/gltf-binary", hdov::lod_glb(&s.db, lod).map_err(reply)?));
+        if let Some(sub) = t.set.subtrees.get(&path) {
+            return Ok(file("application/json", serde_json::to_vec(sub).expect("serialisable")));
+        }
+        if let Some(content) = t.set.contents.get(&path) {
+            return Ok(file("model/gltf-binary", hdov::tiles::content_glb(&s.db, content).map_err(reply)?));
         }
         let cells = if t.index_json.is_some() { s.db.grid().map_or(0, |g| g.cell_count()) } else { 0 };
         let cell = path

@@ -3,6 +3,7 @@
 //! mesh (instances stay instances); `extras` on each node say what it is (kind, id, name, DoV,
 //! LOD level, error).
 
+mod slices;
 pub mod tiles;
 
 use std::collections::HashMap;
@@ -15,6 +16,7 @@ use crate::db::Database;
 use crate::error::{Error, Result};
 use crate::format::catalog::LodRef;
 use crate::query::{Answer, Item, ItemKind};
+use crate::scene::Mesh;
 
 /// One node to write: the item it draws, and its DoV where it has one (an answer's).
 struct Part<'a> {
@@ -77,9 +79,14 @@ pub fn scene_items(db: &Database, lod: u32) -> Result<Vec<Item>> {
 /// (mesh space for an object's level, world space for a node's): what a streaming client fetches
 /// once per record and draws under each item's transform.
 pub fn lod_glb(db: &Database, lod: &LodRef) -> Result<Vec<u8>> {
+    Ok(mesh_glb(&db.lod_mesh(lod)?))
+}
+
+/// A mesh as a `.glb` of one node and one mesh.
+pub fn mesh_glb(m: &Mesh) -> Vec<u8> {
     let mut bin = Vec::new();
     let (mut views, mut accessors) = (Vec::new(), Vec::new());
-    let mesh = push_mesh(db, lod, &mut bin, &mut views, &mut accessors)?;
+    let mesh = push_mesh(m, &mut bin, &mut views, &mut accessors);
     let doc = json!({
         "asset": asset(),
         "scene": 0,
@@ -91,7 +98,7 @@ pub fn lod_glb(db: &Database, lod: &LodRef) -> Result<Vec<u8>> {
         "bufferViews": views,
         "buffers": [{ "byteLength": bin.len() }],
     });
-    Ok(glb(&doc, &bin))
+    glb(&doc, &bin)
 }
 
 /// A light grey, rough, non-metallic surface: glTF's default material is fully metallic, which
@@ -107,14 +114,7 @@ fn asset() -> Value {
 
 /// Appends one LOD's positions and indices to `bin`, with their views and accessors; returns the
 /// glTF mesh (one primitive) that draws them.
-fn push_mesh(
-    db: &Database,
-    lod: &LodRef,
-    bin: &mut Vec<u8>,
-    views: &mut Vec<Value>,
-    accessors: &mut Vec<Value>,
-) -> Result<Value> {
-    let m = db.lod_mesh(lod)?;
+fn push_mesh(m: &Mesh, bin: &mut Vec<u8>, views: &mut Vec<Value>, accessors: &mut Vec<Value>) -> Value {
     let (lo, hi) = m
         .positions
         .iter()
@@ -124,7 +124,7 @@ fn push_mesh(
     accessors.push(json!({ "bufferView": positions, "componentType": 5126, "count": m.positions.len(),
         "type": "VEC3", "min": lo.to_array(), "max": hi.to_array() }));
     accessors.push(json!({ "bufferView": indices, "componentType": 5125, "count": m.indices.len(), "type": "SCALAR" }));
-    Ok(json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 }, "indices": accessors.len() - 1, "material": 0 }] }))
+    json!({ "primitives": [{ "attributes": { "POSITION": accessors.len() - 2 }, "indices": accessors.len() - 1, "material": 0 }] })
 }
 
 /// The `.glb` of `parts`: items drawing the same stored record share one glTF mesh.
@@ -138,7 +138,7 @@ fn glb_of(db: &Database, parts: &[Part]) -> Result<Vec<u8>> {
         let mesh = match mesh_of.get(&i.lod_ref.offset) {
             Some(&m) => m,
             None => {
-                meshes.push(push_mesh(db, &i.lod_ref, &mut bin, &mut views, &mut accessors)?);
+                meshes.push(push_mesh(&db.lod_mesh(&i.lod_ref)?, &mut bin, &mut views, &mut accessors));
                 mesh_of.insert(i.lod_ref.offset, meshes.len() - 1);
                 meshes.len() - 1
             }

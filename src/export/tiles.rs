@@ -1,15 +1,22 @@
 //! The HDoV-tree as an OGC 3D Tiles 1.1 tileset, with each view cell's visibility beside it as
-//! small static files (docs/format.md, "3D Tiles"; decision 120).
+//! small static files (docs/format.md, "3D Tiles"; decisions 120 and 131).
 //!
-//! - A tile per stored level: a node's internal levels are a chain of tiles from its coarsest
-//!   to its finest, whose last tile's children are the node's entries; an object's leaf levels
-//!   likewise, ending in full detail (geometric error 0). `refine` is `REPLACE` throughout, and
-//!   a tile's geometric error is its level's recorded error, which the HLOD contract keeps at or
-//!   above its children's. In a chain each tile's error is strictly above the next one's (levels
-//!   coarser than the tile above, or claiming no more error than a finer one, are left out).
-//! - Content is written once per stored level (`content/n{node}-{level}.glb`,
-//!   `content/m{mesh}-{level}.glb`): every instance of a base mesh is a tile of its own that
-//!   points at the mesh's files, under its model matrix as the tile's `transform`.
+//! - A node's internal levels are drawn in *slices*: each level's triangles grouped by the
+//!   entries they stand for ([`super::slices`]). Each entry has a chain of its slices from the
+//!   node's coarsest level to its finest, whose last tile holds the entry's own tiles; triangles
+//!   that stand for several entries form chains of their own. A client that leaves out the
+//!   entries a cell cannot see so leaves out their share of every coarse level, not only whole
+//!   hidden nodes. An object's leaf levels are a chain too, ending in full detail (geometric
+//!   error 0). `refine` is `REPLACE` throughout; a tile's geometric error is its level's recorded
+//!   error, which the HLOD contract keeps at or above its children's, and in a chain each tile's
+//!   error is strictly above the next one's (levels coarser than the tile above, or claiming no
+//!   more error than a finer one, are left out).
+//! - Every node below the root is a tileset of its own (`subtrees/n{node}.json`, an external
+//!   tileset), named by a tile that clients refine through: a client fetches the tiles of a
+//!   subtree only when it refines into it, so the subtrees a cell cannot see cost nothing.
+//! - Content is written once (`content/n{node}-{level}-{slice}.glb`, `content/m{mesh}-{level}.glb`):
+//!   every instance of a base mesh is a tile of its own that points at the mesh's files, under
+//!   its model matrix as the tile's `transform`.
 //! - Coordinates stay in the scene's frame, turned to 3D Tiles' z-up as glTF content is (glTF is
 //!   y-up; a client turns content by +90° about x), under an optional root transform.
 //! - `visibility/index.json` holds the grid and the matrix from the tileset's frame back to the
@@ -23,7 +30,10 @@ use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 use serde_json::{Value, json};
 
-use super::lod_glb;
+use std::sync::Arc;
+
+use super::slices::{Slice, slice_mesh, slices};
+use super::{lod_glb, mesh_glb};
 use crate::db::Database;
 use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
@@ -54,12 +64,38 @@ pub const Y_UP_TO_Z_UP: Mat4 = Mat4::from_cols(Vec4::X, Vec4::Z, Vec4::NEG_Y, Ve
 pub struct Tileset {
     /// `tileset.json`.
     pub json: Value,
-    /// Each content file's path in the export and the stored level it holds.
-    pub contents: BTreeMap<String, LodRef>,
+    /// The subtrees' tilesets (external tilesets that `tileset.json` and each other name), by
+    /// path in the export.
+    pub subtrees: BTreeMap<String, Value>,
+    /// Each content file's path in the export and what it holds.
+    pub contents: BTreeMap<String, TileContent>,
     /// `visibility/index.json`; `None` for a database without visibility.
     pub index: Option<Value>,
     /// Tiles in the tileset.
     pub tiles: usize,
+}
+
+/// What a content file holds.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TileContent {
+    /// A stored level whole (an object's).
+    Level(LodRef),
+    /// The triangles of a node's stored level that stand for some of its entries
+    /// ([`super::slices`]).
+    Slice {
+        /// The node's level.
+        level: LodRef,
+        /// Which of its triangles.
+        triangles: Arc<[u32]>,
+    },
+}
+
+/// A content file's bytes: its level, or its slice of one, as a `.glb`.
+pub fn content_glb(db: &Database, content: &TileContent) -> Result<Vec<u8>> {
+    match content {
+        TileContent::Level(lod) => lod_glb(db, lod),
+        TileContent::Slice { level, triangles } => Ok(mesh_glb(&slice_mesh(&db.lod_mesh(level)?, triangles))),
+    }
 }
 
 /// What [`write_tileset`] wrote.
@@ -67,12 +103,14 @@ pub struct Tileset {
 pub struct TilesReport {
     /// Tiles in the tileset.
     pub tiles: usize,
-    /// Content files (one per stored level that a tile draws).
+    /// Content files (one per stored object level that a tile draws, one per slice of a node's).
     pub contents: usize,
     /// The content files' bytes.
     pub content_bytes: u64,
-    /// `tileset.json`'s bytes.
+    /// `tileset.json`'s bytes and its subtrees'.
     pub tileset_bytes: u64,
+    /// Subtree tilesets (one per node below the root).
+    pub subtrees: usize,
     /// View cells (a visibility file each).
     pub cells: usize,
     /// The bytes of the cells' visibility files and their index together.
@@ -90,23 +128,36 @@ pub fn tileset(db: &Database, root_transform: Option<Mat4>) -> Result<Tileset> {
     let pages = (0..db.node_count()).map(|n| db.node(n)).collect::<Result<Vec<NodePage>>>()?;
     let root_box = pages[0].node.entries.iter().fold(Aabb::EMPTY, |b, e| b.union(e.mbr));
     let diagonal = if root_box.is_empty() { 1.0 } else { root_box.extent().length().max(f32::MIN_POSITIVE) };
-    let mut w = TileWriter { db, pages: &pages, mesh_boxes: HashMap::new(), contents: BTreeMap::new(), tiles: 0 };
-    // Above every level's error, so that the root's coarsest level is a tile of its own.
-    let top_error = 2.0 * db.catalog().node_lods[0].iter().map(|l| l.error).fold(diagonal, f32::max);
-    let mut root_tile = w.node_tile(0, root_box, top_error)?;
+    let catalog = db.catalog();
+    let levels: Vec<(u32, usize)> =
+        (0..db.node_count()).flat_map(|n| (0..catalog.node_lods[n as usize].len()).map(move |l| (n, l))).collect();
+    let slices = slices(db, &pages, &levels)?;
+    let mut w = TileWriter {
+        db,
+        pages: &pages,
+        slices,
+        mesh_boxes: HashMap::new(),
+        contents: BTreeMap::new(),
+        subtrees: BTreeMap::new(),
+        tiles: 0,
+    };
+    // Above every level's error: the root is an empty tile that a client refines through.
+    let top_error = 2.0 * catalog.node_lods[0].iter().map(|l| l.error).fold(diagonal, f32::max);
+    let children = w.node_below(0, top_error)?;
+    let mut root_tile = w.tile(box_json(&z_up(&root_box)), top_error, None, json!({ "node": 0 }), children);
     root_tile["refine"] = json!("REPLACE");
     if root != Mat4::IDENTITY {
-        root_tile["transform"] = json!(root.to_cols_array());
+        root_tile["transform"] = json!(root.to_cols_array().map(num));
     }
     let mut json = json!({
-        "asset": { "version": "1.1", "generator": concat!("hdov ", env!("CARGO_PKG_VERSION")) },
-        "geometricError": top_error,
+        "asset": asset(),
+        "geometricError": num(top_error),
         "root": root_tile,
         "extras": { "hdov": { "nodes": db.node_count(), "objects": db.catalog().objects.len() } },
     });
     // A database built without visibility is a tileset alone.
     let Some(grid) = db.grid().filter(|_| !db.layouts().is_empty()) else {
-        return Ok(Tileset { json, contents: w.contents, index: None, tiles: w.tiles });
+        return Ok(Tileset { json, subtrees: w.subtrees, contents: w.contents, index: None, tiles: w.tiles });
     };
     json["extras"]["hdov"]["visibility"] = json!(VISIBILITY_INDEX);
     let scene_from_tileset = (root * Y_UP_TO_Z_UP).inverse();
@@ -121,7 +172,26 @@ pub fn tileset(db: &Database, root_transform: Option<Mat4>) -> Result<Tileset> {
         "sceneFromTileset": scene_from_tileset.to_cols_array(),
         "grid": client_grid(grid),
     });
-    Ok(Tileset { json, contents: w.contents, index: Some(index), tiles: w.tiles })
+    Ok(Tileset { json, subtrees: w.subtrees, contents: w.contents, index: Some(index), tiles: w.tiles })
+}
+
+/// The folder of the subtrees' tilesets, beside `content/`.
+const SUBTREES: &str = "subtrees";
+
+/// `tile`'s content URIs and its descendants', written relative to the export's root, made
+/// relative to [`SUBTREES`].
+fn from_subtrees(tile: &mut Value) {
+    if let Some(uri) = tile["content"]["uri"].as_str() {
+        tile["content"]["uri"] = json!(format!("../{uri}"));
+    }
+    for c in tile.get_mut("children").and_then(Value::as_array_mut).into_iter().flatten() {
+        from_subtrees(c);
+    }
+}
+
+/// A tileset's `asset`.
+fn asset() -> Value {
+    json!({ "version": "1.1", "generator": concat!("hdov ", env!("CARGO_PKG_VERSION")) })
 }
 
 /// The grid as a client finds cells in it (docs/format.md, "3D Tiles out"): the region as six
@@ -150,40 +220,107 @@ impl Tileset {
     }
 }
 
-/// Builds the tiles depth first, naming each stored level's content once.
+/// Builds the tiles depth first, naming each content once.
 struct TileWriter<'a> {
     db: &'a Database,
     pages: &'a [NodePage],
+    /// Every node level's slices by the entries they stand for.
+    slices: HashMap<(u32, usize), Vec<Slice>>,
     /// Each base mesh's box over all its levels, in mesh space.
     mesh_boxes: HashMap<u32, Aabb>,
-    contents: BTreeMap<String, LodRef>,
+    contents: BTreeMap<String, TileContent>,
+    subtrees: BTreeMap<String, Value>,
     tiles: usize,
 }
 
 impl TileWriter<'_> {
-    /// Node `n` (box `mbr`) below a tile of error `above`: its levels of less error, coarsest
-    /// first, the finest holding the node's entries (a client refines a tile whose error is its
-    /// parent's without drawing it).
-    fn node_tile(&mut self, n: u32, mbr: Aabb, above: f32) -> Result<Value> {
+    /// The tiles that draw node `n`'s subtree below a tile of error `above` (decision 131): for
+    /// each entry, the chain of its slices of the node's levels of less error, coarsest first,
+    /// the finest holding the entry's own tiles (an object's chain, or a child node's subtree
+    /// tileset); for triangles that stand for several entries, a chain of their slices. A client
+    /// draws a node's level as the slices of the entries it may see.
+    fn node_below(&mut self, n: u32, above: f32) -> Result<Vec<Value>> {
         let chain = self.db.catalog().node_lods[n as usize].clone();
         let errors = chain_errors(&chain, 1.0);
         let kept: Vec<usize> = distinct_levels(&errors).into_iter().filter(|&l| errors[l] < above).collect();
-        let finest = kept.first().map_or(above, |&l| errors[l]);
         let pages = self.pages;
-        let page = &pages[n as usize];
-        let children = page
-            .node
-            .entries
-            .iter()
-            .map(|e| if page.node.is_leaf() { self.object_tile(e.child, finest) } else { self.node_tile(e.child, e.mbr, finest) })
-            .collect::<Result<Vec<Value>>>()?;
-        let bounds = box_json(&z_up(&mbr));
-        if kept.is_empty() {
-            // No level fits under the tile above: an empty tile that a client refines through.
-            return Ok(self.tile(bounds, above, None, json!({ "node": n }), children));
+        let node = &pages[n as usize].node;
+        let key = |k: u32| {
+            let child = u64::from(node.entries[k as usize].child);
+            if node.is_leaf() { u64::from(self.db.node_count()) + child } else { child }
+        };
+        // Each set of entries' slices, finest first, as (level, slice).
+        let mut chains: BTreeMap<Vec<u32>, Vec<(usize, usize)>> = BTreeMap::new();
+        for &l in &kept {
+            for (k, s) in self.slices[&(n, l)].iter().enumerate() {
+                chains.entry(s.entries.clone()).or_default().push((l, k));
+            }
         }
-        let content = |l: usize| (format!("n{n}-{l}"), chain[l]);
-        Ok(self.chain(&bounds, &kept, &errors, content, |l| json!({ "node": n, "level": l }), children))
+        let mut out = Vec::new();
+        for (k, e) in node.entries.iter().enumerate() {
+            let own = chains.remove(&vec![k as u32]).unwrap_or_default();
+            let finest = own.first().map_or(above, |&(l, _)| errors[l]);
+            let below =
+                if node.is_leaf() { self.object_tile(e.child, finest)? } else { self.subtree(e.child, e.mbr, finest)? };
+            if own.is_empty() {
+                out.push(below);
+                continue;
+            }
+            out.push(self.slice_chain(n, &chain, &errors, &own, e.mbr, &[key(k as u32)], vec![below]));
+        }
+        for (entries, own) in chains {
+            let keys: Vec<u64> = entries.iter().map(|&k| key(k)).collect();
+            // Past the node's finest level its entries draw themselves: the chain ends in an
+            // empty tile, since a client draws a tile without children however close it is.
+            let b = own.iter().fold(Aabb::EMPTY, |b, &(l, k)| b.union(self.slices[&(n, l)][k].bounds));
+            let end = self.tile(box_json(&z_up(&b)), 0.0, None, json!({ "node": n, "entries": keys }), Vec::new());
+            out.push(self.slice_chain(n, &chain, &errors, &own, Aabb::EMPTY, &keys, vec![end]));
+        }
+        Ok(out)
+    }
+
+    /// The chain of node `n`'s slices `own` (finest first, as (level, slice)) that stand for the
+    /// entries `keys` (plugin keys), boxed by `mbr` and their triangles; the finest tile holds
+    /// `children`.
+    #[allow(clippy::too_many_arguments)]
+    fn slice_chain(
+        &mut self,
+        n: u32,
+        chain: &[LodRef],
+        errors: &[f32],
+        own: &[(usize, usize)],
+        mbr: Aabb,
+        keys: &[u64],
+        mut children: Vec<Value>,
+    ) -> Value {
+        let b = own.iter().fold(mbr, |b, &(l, k)| b.union(self.slices[&(n, l)][k].bounds));
+        let bounds = box_json(&z_up(&b));
+        for &(l, k) in own {
+            let triangles: Arc<[u32]> = self.slices[&(n, l)][k].triangles.clone().into();
+            let content = (format!("n{n}-{l}-{k}"), TileContent::Slice { level: chain[l], triangles });
+            let key = json!({ "node": n, "level": l, "entries": keys });
+            children = vec![self.tile(bounds.clone(), errors[l], Some(content), key, children)];
+        }
+        children.pop().expect("a chain has a slice")
+    }
+
+    /// Node `c` (box `mbr`) below a tile of error `above`, as a tile that names the tileset of
+    /// its subtree (`subtrees/n{c}.json`): a client fetches it only when it refines into `c`, so
+    /// the subtrees its cell cannot see cost nothing. Clients refine such a tile without drawing
+    /// it.
+    fn subtree(&mut self, c: u32, mbr: Aabb, above: f32) -> Result<Value> {
+        let children = self.node_below(c, above)?;
+        let bounds = box_json(&z_up(&mbr));
+        let mut root = self.tile(bounds.clone(), above, None, json!({ "node": c }), children);
+        root["refine"] = json!("REPLACE");
+        let path = format!("{SUBTREES}/n{c}.json");
+        // Its URIs are relative to its own folder.
+        from_subtrees(&mut root);
+        let set = json!({ "asset": asset(), "geometricError": num(above), "root": root });
+        self.subtrees.insert(path.clone(), set);
+        let mut tile = self.tile(bounds, above, None, json!({ "node": c }), Vec::new());
+        tile["content"] = json!({ "uri": path });
+        Ok(tile)
     }
 
     /// Object `o` below a tile of error `above`: its levels of less error (full detail always),
@@ -196,10 +333,10 @@ impl TileWriter<'_> {
         let bounds = box_json(&z_up(&self.mesh_box(mesh, &chain)?));
         let errors = chain_errors(&chain, scale);
         let kept: Vec<usize> = distinct_levels(&errors).into_iter().filter(|&l| l == 0 || errors[l] < above).collect();
-        let content = |l: usize| (format!("m{mesh}-{l}"), chain[l]);
+        let content = |l: usize| (format!("m{mesh}-{l}"), TileContent::Level(chain[l]));
         let mut tile = self.chain(&bounds, &kept, &errors, content, |l| json!({ "object": o, "level": l }), Vec::new());
         if model != Mat4::IDENTITY {
-            tile["transform"] = json!((Y_UP_TO_Z_UP * model * Y_UP_TO_Z_UP.inverse()).to_cols_array());
+            tile["transform"] = json!((Y_UP_TO_Z_UP * model * Y_UP_TO_Z_UP.inverse()).to_cols_array().map(num));
         }
         Ok(tile)
     }
@@ -211,7 +348,7 @@ impl TileWriter<'_> {
         bounds: &Value,
         levels: &[usize],
         errors: &[f32],
-        content: impl Fn(usize) -> (String, LodRef),
+        content: impl Fn(usize) -> (String, TileContent),
         key: impl Fn(usize) -> Value,
         mut children: Vec<Value>,
     ) -> Value {
@@ -221,10 +358,10 @@ impl TileWriter<'_> {
         children.pop().expect("a chain has a level")
     }
 
-    /// One tile; `content` names its stored level (written once however many tiles share it).
-    fn tile(&mut self, bounds: Value, error: f32, content: Option<(String, LodRef)>, key: Value, children: Vec<Value>) -> Value {
+    /// One tile; `content` names what it draws (written once however many tiles share it).
+    fn tile(&mut self, bounds: Value, error: f32, content: Option<(String, TileContent)>, key: Value, children: Vec<Value>) -> Value {
         self.tiles += 1;
-        let mut tile = json!({ "boundingVolume": { "box": bounds }, "geometricError": error, "extras": { "hdov": key } });
+        let mut tile = json!({ "boundingVolume": { "box": bounds }, "geometricError": num(error), "extras": { "hdov": key } });
         if let Some((name, lod)) = content {
             let uri = format!("content/{name}.glb");
             tile["content"] = json!({ "uri": &uri });
@@ -293,7 +430,15 @@ fn box_json(b: &Aabb) -> Value {
     let magnitude = b.min.abs().max(b.max.abs()).max_element();
     let pad = (magnitude * 4.0 * f32::EPSILON).max(b.extent().length() * 1e-6).max(f32::MIN_POSITIVE.sqrt());
     let h = b.extent() * 0.5 + Vec3::splat(pad);
-    json!([c.x, c.y, c.z, h.x, 0.0, 0.0, 0.0, h.y, 0.0, 0.0, 0.0, h.z])
+    json!([c.x, c.y, c.z, h.x, 0.0, 0.0, 0.0, h.y, 0.0, 0.0, 0.0, h.z].map(num))
+}
+
+/// An `f32` as the shortest decimal that reads back as it (`694.801`, not the `f64`
+/// `694.801025390625`): tilesets are mostly numbers, and a client downloads them. A reader
+/// taking it as an `f64` is within half a unit in the last place of the `f32`, which box
+/// padding covers, and distinct `f32`s stay distinct and in order.
+fn num(x: f32) -> Value {
+    json!(x.to_string().parse::<f64>().expect("an f32 prints as a number"))
 }
 
 /// The version of the cell file format ([`encode_cell`]).
@@ -441,19 +586,26 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
     let set = tileset(db, root_transform)?;
     let txn = hdov_storage::DirTxn::begin(dir, hdov_storage::Overwrite::Never)?;
     let at = |p: &str| -> PathBuf { txn.path().join(p) };
-    let subs: &[&str] = if set.index.is_some() { &["content", "visibility/cells"] } else { &["content"] };
+    let subs: &[&str] =
+        if set.index.is_some() { &["content", SUBTREES, "visibility/cells"] } else { &["content", SUBTREES] };
     for sub in subs {
         std::fs::create_dir_all(at(sub)).map_err(|e| Error::io(at(sub), e))?;
     }
     let write = |path: PathBuf, bytes: &[u8]| std::fs::write(&path, bytes).map_err(|e| Error::io(path, e));
     let tileset_bytes = set.tileset_bytes();
     write(at(TILESET_FILE), &tileset_bytes)?;
+    let mut subtree_bytes = 0;
+    for (path, json) in &set.subtrees {
+        let bytes = serde_json::to_vec(json).expect("serialisable");
+        subtree_bytes += bytes.len() as u64;
+        write(at(path), &bytes)?;
+    }
     let bar = progress.bar("content", set.contents.len() as u64);
     let content_bytes = set
         .contents
         .par_iter()
-        .map(|(name, lod)| {
-            let bytes = lod_glb(db, lod)?;
+        .map(|(name, content)| {
+            let bytes = content_glb(db, content)?;
             write(at(name), &bytes)?;
             bar.advance(1);
             Ok(bytes.len() as u64)
@@ -483,7 +635,8 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
         tiles: set.tiles,
         contents: set.contents.len(),
         content_bytes,
-        tileset_bytes: tileset_bytes.len() as u64,
+        tileset_bytes: tileset_bytes.len() as u64 + subtree_bytes,
+        subtrees: set.subtrees.len(),
         cells: cells as usize,
         visibility_bytes: cell_bytes + index_bytes.len() as u64,
     })

@@ -6,7 +6,9 @@
 // out"). With this plugin registered, the renderer finds the camera's cell on every update and
 //
 //   (a) never loads or refines a tile the cell cannot see: such a tile is out of view, so its
-//       subtree is never visited;
+//       subtree is never visited (nor its subtree's tileset fetched); a node's coarse level comes
+//       in slices, one per entry it stands for, and only the slices of entries the cell may see
+//       are drawn;
 //   (b) refines a stopped subtree (seen with DoV ≤ η) no further than the query draws it: the
 //       stop's tile gets no screen-space error, so the renderer keeps it as a leaf.
 //
@@ -218,7 +220,11 @@ export class HdovVisibilityPlugin {
     const key = this.key(tile);
     if (key == null) return false;
     const v = this.visibility;
-    if (v ? v.dov.has(key) : this.index != null && this.cell == null) return false;
+    // A slice of a node's level stands for some of its entries (`entries`): it is drawn where
+    // the cell may see one of them.
+    const entries = tile.extras.hdov.entries;
+    const seen = (k) => v.dov.has(k);
+    if (v ? (entries ? entries.some(seen) : seen(key)) : this.index != null && this.cell == null) return false;
     target.inView = false;
     target.error = 0;
     return true;

@@ -8,7 +8,8 @@
 //! - [`bench`]: the query benchmarks' database fixture and viewpoints;
 //! - [`view_error`]: from-region error as a user sees it (wrong share of a view, per frame);
 //! - [`testdata`]: assimp's test models and the glTF-Validator, skipped or required;
-//! - [`browser`]: pages of `hdov serve` in headless chromium.
+//! - [`browser`]: pages of `hdov serve` in headless chromium;
+//! - [`tiles`]: a 3D Tiles tileset with its subtree tilesets put in place.
 
 pub mod audit;
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod browser;
 pub mod gpu;
 pub mod scenes;
 pub mod testdata;
+pub mod tiles;
 pub mod view_error;
 
 /// Prints `skipped: WHY (TEST)` where `cargo test` shows it: on the stderr handle itself, not
