@@ -63,7 +63,7 @@ pub fn slices(db: &Database, pages: &[NodePage], asked: &[(u32, usize)]) -> Resu
     for (&(n, _), mesh) in asked.iter().zip(&levels) {
         for &p in &mesh.positions {
             let nodes = asks.entry(key(p)).or_default();
-            if nodes.last() != Some(&n) && !nodes.contains(&n) {
+            if !nodes.contains(&n) {
                 nodes.push(n);
             }
         }
