@@ -445,7 +445,7 @@ async fn tile_file(State(s): State<Arc<Served>>, Path(path): Path<String>) -> Re
             return Ok(file("application/json", index.clone()));
         }
         if let Some(sub) = t.set.subtrees.get(&path) {
-            return Ok(file("application/json", serde_json::to_vec(sub).expect("serialisable")));
+            return Ok(file("application/json", sub.clone()));
         }
         if let Some(content) = t.set.contents.get(&path) {
             return Ok(file("model/gltf-binary", hdov::tiles::content_glb(&s.db, content).map_err(reply)?));

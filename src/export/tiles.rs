@@ -33,7 +33,7 @@ use serde_json::{Value, json};
 use std::sync::Arc;
 
 use super::slices::{Slice, slice_mesh, slices};
-use super::{lod_glb, mesh_glb};
+use super::mesh_glb;
 use crate::db::Database;
 use crate::error::{Error, Param, Result};
 use crate::format::catalog::LodRef;
@@ -42,6 +42,7 @@ use crate::geom::{Aabb, max_scale};
 use crate::grid::ViewGrid;
 use crate::progress::Report;
 use crate::query::{CellVisibility, QueryParams};
+use crate::scene::Mesh;
 use crate::progress::Progress;
 
 /// The tileset, in the directory the export writes.
@@ -64,9 +65,9 @@ pub const Y_UP_TO_Z_UP: Mat4 = Mat4::from_cols(Vec4::X, Vec4::Z, Vec4::NEG_Y, Ve
 pub struct Tileset {
     /// `tileset.json`.
     pub json: Value,
-    /// The subtrees' tilesets (external tilesets that `tileset.json` and each other name), by
-    /// path in the export.
-    pub subtrees: BTreeMap<String, Value>,
+    /// The subtrees' tilesets (external tilesets that `tileset.json` and each other name),
+    /// serialised, by path in the export.
+    pub subtrees: BTreeMap<String, Vec<u8>>,
     /// Each content file's path in the export and what it holds.
     pub contents: BTreeMap<String, TileContent>,
     /// `visibility/index.json`; `None` for a database without visibility.
@@ -90,12 +91,26 @@ pub enum TileContent {
     },
 }
 
+impl TileContent {
+    /// The stored level it is made from.
+    pub fn level(&self) -> &LodRef {
+        match self {
+            TileContent::Level(lod) | TileContent::Slice { level: lod, .. } => lod,
+        }
+    }
+
+    /// Its `.glb`, from its level's mesh `mesh`.
+    fn glb(&self, mesh: &Mesh) -> Vec<u8> {
+        match self {
+            TileContent::Level(_) => mesh_glb(mesh),
+            TileContent::Slice { triangles, .. } => mesh_glb(&slice_mesh(mesh, triangles)),
+        }
+    }
+}
+
 /// A content file's bytes: its level, or its slice of one, as a `.glb`.
 pub fn content_glb(db: &Database, content: &TileContent) -> Result<Vec<u8>> {
-    match content {
-        TileContent::Level(lod) => lod_glb(db, lod),
-        TileContent::Slice { level, triangles } => Ok(mesh_glb(&slice_mesh(&db.lod_mesh(level)?, triangles))),
-    }
+    Ok(content.glb(&db.lod_mesh(content.level())?))
 }
 
 /// What [`write_tileset`] wrote.
@@ -229,7 +244,7 @@ struct TileWriter<'a> {
     /// Each base mesh's box over all its levels, in mesh space.
     mesh_boxes: HashMap<u32, Aabb>,
     contents: BTreeMap<String, TileContent>,
-    subtrees: BTreeMap<String, Value>,
+    subtrees: BTreeMap<String, Vec<u8>>,
     tiles: usize,
 }
 
@@ -246,8 +261,8 @@ impl TileWriter<'_> {
         let pages = self.pages;
         let node = &pages[n as usize].node;
         let key = |k: u32| {
-            let child = u64::from(node.entries[k as usize].child);
-            if node.is_leaf() { u64::from(self.db.node_count()) + child } else { child }
+            let child = node.entries[k as usize].child;
+            if node.is_leaf() { object_key(self.db.node_count(), child) } else { u64::from(child) }
         };
         // Each set of entries' slices, finest first, as (level, slice).
         let mut chains: BTreeMap<Vec<u32>, Vec<(usize, usize)>> = BTreeMap::new();
@@ -291,17 +306,20 @@ impl TileWriter<'_> {
         own: &[(usize, usize)],
         mbr: Aabb,
         keys: &[u64],
-        mut children: Vec<Value>,
+        children: Vec<Value>,
     ) -> Value {
         let b = own.iter().fold(mbr, |b, &(l, k)| b.union(self.slices[&(n, l)][k].bounds));
-        let bounds = box_json(&z_up(&b));
-        for &(l, k) in own {
-            let triangles: Arc<[u32]> = self.slices[&(n, l)][k].triangles.clone().into();
-            let content = (format!("n{n}-{l}-{k}"), TileContent::Slice { level: chain[l], triangles });
-            let key = json!({ "node": n, "level": l, "entries": keys });
-            children = vec![self.tile(bounds.clone(), errors[l], Some(content), key, children)];
-        }
-        children.pop().expect("a chain has a slice")
+        // A set of entries has at most one slice of a level.
+        let contents: HashMap<usize, (String, TileContent)> = own
+            .iter()
+            .map(|&(l, k)| {
+                let triangles: Arc<[u32]> = self.slices[&(n, l)][k].triangles.clone().into();
+                (l, (format!("n{n}-{l}-{k}"), TileContent::Slice { level: chain[l], triangles }))
+            })
+            .collect();
+        let levels: Vec<usize> = own.iter().map(|&(l, _)| l).collect();
+        let key = |l: usize| json!({ "node": n, "level": l, "entries": keys });
+        self.chain(&box_json(&z_up(&b)), &levels, errors, |l| contents[&l].clone(), key, children)
     }
 
     /// Node `c` (box `mbr`) below a tile of error `above`, as a tile that names the tileset of
@@ -317,7 +335,7 @@ impl TileWriter<'_> {
         // Its URIs are relative to its own folder.
         from_subtrees(&mut root);
         let set = json!({ "asset": asset(), "geometricError": num(above), "root": root });
-        self.subtrees.insert(path.clone(), set);
+        self.subtrees.insert(path.clone(), serde_json::to_vec(&set).expect("serialisable"));
         let mut tile = self.tile(bounds, above, None, json!({ "node": c }), Vec::new());
         tile["content"] = json!({ "uri": path });
         Ok(tile)
@@ -499,7 +517,13 @@ pub fn cell_file_bytes(db: &Database, cell: u32) -> Result<Vec<u8>> {
 /// Node pairs and object pairs as one list by key (an object's key is `nodes` plus its id).
 fn keyed<T: Copy>(of_nodes: &[(u32, T)], of_objects: &[(u32, T)], nodes: u32) -> Vec<(u64, T)> {
     let node_keys = of_nodes.iter().map(|&(n, x)| (u64::from(n), x));
-    node_keys.chain(of_objects.iter().map(|&(o, x)| (u64::from(nodes) + u64::from(o), x))).collect()
+    node_keys.chain(of_objects.iter().map(|&(o, x)| (object_key(nodes, o), x))).collect()
+}
+
+/// Object `o`'s key in cell files and tile extras: the node count plus its id (a node's key is
+/// its id).
+fn object_key(nodes: u32, o: u32) -> u64 {
+    u64::from(nodes) + u64::from(o)
 }
 
 fn leb128(out: &mut Vec<u8>, mut x: u64) {
@@ -595,20 +619,28 @@ pub fn write_tileset(db: &Database, dir: &Path, root_transform: Option<Mat4>, pr
     let tileset_bytes = set.tileset_bytes();
     write(at(TILESET_FILE), &tileset_bytes)?;
     let mut subtree_bytes = 0;
-    for (path, json) in &set.subtrees {
-        let bytes = serde_json::to_vec(json).expect("serialisable");
+    for (path, bytes) in &set.subtrees {
         subtree_bytes += bytes.len() as u64;
-        write(at(path), &bytes)?;
+        write(at(path), bytes)?;
     }
     let bar = progress.bar("content", set.contents.len() as u64);
-    let content_bytes = set
-        .contents
-        .par_iter()
-        .map(|(name, content)| {
-            let bytes = content_glb(db, content)?;
-            write(at(name), &bytes)?;
-            bar.advance(1);
-            Ok(bytes.len() as u64)
+    // Each stored level is read once: a node level's slices are all cut from one read.
+    let mut by_level: BTreeMap<u64, Vec<(&String, &TileContent)>> = BTreeMap::new();
+    for (name, content) in &set.contents {
+        by_level.entry(content.level().offset).or_default().push((name, content));
+    }
+    let content_bytes = by_level
+        .into_par_iter()
+        .map(|(_, files)| {
+            let mesh = db.lod_mesh(files[0].1.level())?;
+            let mut sum = 0;
+            for (name, content) in files {
+                let bytes = content.glb(&mesh);
+                write(at(name), &bytes)?;
+                bar.advance(1);
+                sum += bytes.len() as u64;
+            }
+            Ok(sum)
         })
         .sum::<Result<u64>>()?;
     bar.finish_and_clear();
