@@ -74,12 +74,12 @@ pub use dov::{DovBackend, IdCube, PointDov, open_backend};
 pub use error::{Error, Param, Result};
 pub use export::tiles;
 pub use export::{lod_glb, scene_items, write_answer_glb, write_scene_glb};
-pub use format::Manifest;
 pub use format::catalog::LodRef;
 pub use format::params::{
     AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,
     LodParams, ObjectParts, RayProbing, Sampling, Shard, VisibilityParams,
 };
+pub use format::{BakePhases, Manifest};
 pub use geom::Aabb;
 pub use grid::ViewGrid;
 pub use hdov_storage::{CacheLimits, DovCodec, Error as StorageError, LayoutKind, PolicyKind};

@@ -227,7 +227,9 @@ fn a_quarter_of_a_cell_answers_what_is_seen_from_it() {
 }
 
 /// Cells where viewers stand (quarters, sides of walls) are sharded with their lattice cells:
-/// shards of the two-storey building, merged, equal its whole build file for file.
+/// shards of the two-storey building, merged, equal its whole build file for file. Each
+/// manifest says where its bake's time went: the phases that ran, within the stage's seconds;
+/// the merged one, the shards' sums; one written before phases were recorded still opens.
 #[test]
 fn shards_of_cells_where_viewers_stand_merge_into_the_whole() {
     let tmp = tempfile::tempdir().unwrap();
@@ -263,4 +265,26 @@ fn shards_of_cells_where_viewers_stand_merge_into_the_whole() {
         Database::open(&merged).unwrap().info().unwrap().cells,
         Database::open(&whole).unwrap().info().unwrap().cells
     );
+
+    let info = |dir: &std::path::Path| hdov::Manifest::read(dir).unwrap().visibility.unwrap();
+    let ran = info(&whole);
+    let phases = ran.phases.clone().expect("a new build records its phases");
+    // Region rays (the default sampler), refined into quarters: every phase but the samplers'
+    // own cube maps ran.
+    for (name, s) in phases.named() {
+        assert_eq!(s > 0.0, name != "points", "{name}: {s} s");
+    }
+    let spent: f64 = phases.named().iter().map(|p| p.1).sum();
+    assert!(spent <= ran.seconds, "{spent} s of phases in {} s", ran.seconds);
+    let mut sum = hdov::BakePhases::default();
+    for s in &shards {
+        sum.add(&info(s).phases.unwrap());
+    }
+    assert_eq!(info(&merged).phases, Some(sum));
+    // A manifest written before phases were recorded.
+    let path = whole.join("manifest.json");
+    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    json["visibility"].as_object_mut().unwrap().remove("phases");
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    assert_eq!(info(&whole).phases, None);
 }

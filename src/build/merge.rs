@@ -16,7 +16,7 @@ use super::{VisibilityParams, begin_write, layout_info, layout_options, write_ma
 use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
-use crate::format::{FileChecksum, Manifest, SCENE_FILES, VisibilityInfo};
+use crate::format::{BakePhases, FileChecksum, Manifest, SCENE_FILES, VisibilityInfo};
 use crate::grid::ViewGrid;
 use crate::overwrite::Overwrite;
 
@@ -132,6 +132,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         floored_objects: 0,
         skipped_points: 0,
         seconds: 0.0,
+        phases: Some(BakePhases::default()),
         ..first.info.clone()
     };
     let mut in_order: Vec<&ShardDir> = dirs.iter().collect();
@@ -159,6 +160,14 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         info.floored_objects = info.floored_objects.saturating_add(s.info.floored_objects);
         info.skipped_points = info.skipped_points.saturating_add(s.info.skipped_points);
         info.seconds += s.info.seconds;
+        // A shard written before phases were recorded leaves the whole unknown.
+        info.phases = match (info.phases.take(), &s.info.phases) {
+            (Some(mut sum), Some(p)) => {
+                sum.add(p);
+                Some(sum)
+            }
+            _ => None,
+        };
     }
     info.layouts = kinds
         .iter()

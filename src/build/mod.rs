@@ -392,6 +392,7 @@ fn build_visibility(
         floored_objects: dov.cells.iter().map(|(_, c)| c.floored as u64).sum(),
         skipped_points: dov.cells.iter().map(|(_, c)| c.skipped_points as u64).sum(),
         seconds: t.elapsed().as_secs_f64(),
+        phases: Some(dov.phases),
         layouts,
     })
 }

@@ -388,6 +388,9 @@ fn print_visibility(m: &Manifest) {
         v.seconds,
         v.backend
     );
+    if let Some(phases) = &v.phases {
+        println!("    phases: {phases}");
+    }
     for l in &v.layouts {
         println!("    {:<17} V-pages {:>12} bytes, index {:>10} bytes", l.name, l.vpage_bytes, l.index_bytes);
     }

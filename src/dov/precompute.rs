@@ -15,6 +15,7 @@
 
 use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
+use std::time::Instant;
 
 use glam::Vec3;
 
@@ -23,6 +24,7 @@ use super::sampling::{is_inside, seen_by};
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::{Error, Param, Result};
 pub use crate::format::params::{FloorTest, Shard};
+use crate::format::BakePhases;
 use crate::format::params::{Sampling, VisibilityParams};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
@@ -197,6 +199,8 @@ pub struct ShardDov {
     pub footprint_rays: u64,
     /// Region views drawn instead of region rays cast (the GPU backend).
     pub region_views: u64,
+    /// Where the shard's time went.
+    pub phases: BakePhases,
 }
 
 /// Computes the [`CellDov`] of every cell of `shard`.
@@ -255,12 +259,14 @@ pub fn precompute_shard(
         let cell_box = grid.cell_box(coords);
         let places = if split { grid.lattice_places(id) } else { grid.places_of(id) };
         let needed = corners_of(coords);
+        let start = Instant::now();
         for &corner in &needed {
             if let Entry::Vacant(slot) = corner_dov.entry(corner) {
                 slot.insert(backend.measure(grid.corner_position(grid.corner_coords(corner)))?);
                 tally.measured(false);
             }
         }
+        tally.phases.corners += start.elapsed().as_secs_f64();
         let own = grid.corners_next_to(coords, places);
         let own_dov: Vec<&PointDov> = own.iter().map(|c| &corner_dov[c]).collect();
         let nearby_ids: Vec<usize> = needed.iter().copied().filter(|c| !own.contains(c)).collect();
@@ -322,11 +328,15 @@ pub fn precompute_shard(
                 // A sampler that cannot place its findings, or none (the corners alone: a
                 // quarter has 2 of them), leaves the view cell what the whole cell sees.
                 let mut placed = !samplers.is_empty();
+                let start = Instant::now();
                 for sampler in &mut samplers {
                     match sampler.refine(backend, &site, child_places, &seen, &candidates, &mut tally)? {
                         Some(refined) => seen = refined,
                         None => placed = false,
                     }
+                }
+                if !samplers.is_empty() {
+                    tally.phases.refine += start.elapsed().as_secs_f64();
                 }
                 if !placed {
                     seen.extend(&seen_whole);
@@ -355,6 +365,7 @@ pub fn precompute_shard(
     out.probe_rays = tally.probe_rays;
     out.footprint_rays = tally.footprint_rays;
     out.region_views = tally.region_views;
+    out.phases = tally.phases;
     Ok(out)
 }
 

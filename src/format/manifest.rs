@@ -24,7 +24,65 @@ pub struct VisibilityInfo {
     /// Sample points left out because they lie inside geometry.
     pub skipped_points: u64,
     pub seconds: f64,
+    /// Where `seconds` went; absent from manifests written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phases: Option<BakePhases>,
     pub layouts: Vec<LayoutInfo>,
+}
+
+/// Wall seconds of the visibility stage's phases, each summed over the cells (a phase runs
+/// parallel inside): where a bake's time goes. What they leave of [`VisibilityInfo::seconds`] is
+/// opening the backend (its BVHs), the floors, combining the views and writing the layouts.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BakePhases {
+    /// Cube maps at the cells' corners.
+    pub corners: f64,
+    /// The samplers' own cube maps (interior and adaptive points).
+    pub points: f64,
+    /// Region and border rays (ray probing, before the cells).
+    pub region_rays: f64,
+    /// Rays aimed at candidates until each is met or has used its points (ray probing).
+    pub search: f64,
+    /// Rays that count which point sees each found object most (ray probing).
+    pub hit_counts: f64,
+    /// The found objects' DoV on their footprints (ray probing).
+    pub footprints: f64,
+    /// Lattice cells refined into their view cells.
+    pub refine: f64,
+}
+
+/// The phases that ran, as `corners 4.0 s, region rays 5.9 s, …`.
+impl std::fmt::Display for BakePhases {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ran: Vec<String> = self.named().iter().filter(|p| p.1 > 0.0).map(|(name, s)| format!("{name} {s:.1} s")).collect();
+        f.write_str(&ran.join(", "))
+    }
+}
+
+impl BakePhases {
+    /// The phases as (name, seconds), in the order they run.
+    pub fn named(&self) -> [(&'static str, f64); 7] {
+        [
+            ("corners", self.corners),
+            ("points", self.points),
+            ("region rays", self.region_rays),
+            ("search", self.search),
+            ("hit counts", self.hit_counts),
+            ("footprints", self.footprints),
+            ("refine", self.refine),
+        ]
+    }
+
+    /// `self` plus `o`, phase by phase (shards merged).
+    pub fn add(&mut self, o: &BakePhases) {
+        self.corners += o.corners;
+        self.points += o.points;
+        self.region_rays += o.region_rays;
+        self.search += o.search;
+        self.hit_counts += o.hit_counts;
+        self.footprints += o.footprints;
+        self.refine += o.refine;
+    }
 }
 
 /// One V-page layout as written.

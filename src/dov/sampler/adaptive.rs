@@ -120,6 +120,7 @@ impl CellSampler for Adaptive {
     }
 
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
+        let start = std::time::Instant::now();
         let known: Vec<&PointDov> = cell.corners.iter().copied().chain(points.iter()).collect();
         let candidates = seen_by(cell.nearby.iter().copied());
         let planned = self.0.seeds as usize;
@@ -129,6 +130,7 @@ impl CellSampler for Adaptive {
             tally.measured(taken > planned);
         })?;
         points.extend(extra);
+        tally.phases.points += start.elapsed().as_secs_f64();
         Ok(())
     }
 }

@@ -15,11 +15,13 @@ impl CellSampler for Interior {
     }
 
     fn sample(&mut self, backend: &mut dyn DovBackend, cell: &CellSite, points: &mut Vec<PointDov>, tally: &mut Tally) -> Result<()> {
+        let start = std::time::Instant::now();
         points.reserve(self.0 as usize);
         for p in interior_points(&cell.view_cell(), self.0) {
             points.push(backend.measure(p)?);
             tally.measured(false);
         }
+        tally.phases.points += start.elapsed().as_secs_f64();
         Ok(())
     }
 }

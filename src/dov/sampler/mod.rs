@@ -16,6 +16,7 @@ pub use probe::{Candidate, CellProbe, Leads, RegionFind, probe_cell, region_find
 
 use super::{CubeMap, DovBackend, PointDov};
 use crate::error::Result;
+use crate::format::BakePhases;
 use crate::format::sampling::Sampling;
 use crate::geom::Aabb;
 use crate::grid::{ViewCell, ViewGrid};
@@ -64,12 +65,14 @@ pub struct Tally<'a> {
     pub footprint_rays: u64,
     /// Region views drawn (the GPU's region sampling, [`DovBackend::region_views`]).
     pub region_views: u64,
+    /// Where the time went, phase by phase.
+    pub phases: BakePhases,
 }
 
 impl<'a> Tally<'a> {
     /// A tally of `planned` measurements, none done.
     pub fn new(planned: usize, progress: &'a dyn Report) -> Self {
-        Tally { done: 0, planned, progress, probe_rays: 0, footprint_rays: 0, region_views: 0 }
+        Tally { done: 0, planned, progress, probe_rays: 0, footprint_rays: 0, region_views: 0, phases: BakePhases::default() }
     }
 
     /// One more measurement done; `beyond_plan` when it was not counted in the plan.

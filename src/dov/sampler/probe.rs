@@ -25,6 +25,7 @@
 //! the neighbouring cells' region rays meet becomes a candidate here (`precompute`).
 
 use std::collections::{BTreeMap, HashMap, HashSet};
+use std::time::Instant;
 
 
 use glam::Vec3;
@@ -36,6 +37,7 @@ use crate::dov::rays::RayCaster;
 use crate::dov::sampling::{RegionRays, RegionSequence, RegionViews, halton_point, seen_by};
 use crate::dov::{BACK_FACE_BIT, CubeMap, DovBackend, NO_OBJECT, PointDov};
 use crate::error::{Error, Param, Result};
+use crate::format::BakePhases;
 use crate::format::sampling::RayProbing;
 use crate::geom::Aabb;
 use crate::grid::{ViewCell, ViewGrid};
@@ -202,6 +204,8 @@ pub struct CellProbe {
     pub rays: u64,
     /// Rays cast to measure the footprints of what was found.
     pub footprint_rays: u64,
+    /// Seconds of its search, hit counts and footprints.
+    pub phases: BakePhases,
 }
 
 /// What a cell's probing starts from.
@@ -242,7 +246,10 @@ pub fn probe_cell(
     let settled: HashSet<u32> = region.iter().map(|f| f.object).filter(|o| !seen.contains(o)).collect();
     // The unseen objects the candidates' rays meet first, candidates included, each with the
     // point that met it first.
+    let mut phases = BakePhases::default();
+    let start = Instant::now();
     let (mut found, n) = aim.search(candidates, seen, &settled);
+    phases.search = start.elapsed().as_secs_f64();
     cast += n;
     found.sort_unstable();
     found.dedup_by_key(|f| f.0);
@@ -256,10 +263,13 @@ pub fn probe_cell(
     // see most of it), on its footprint there; without any, where it was met: the point whose
     // ray met it on the way to another, or the region ray's origin.
     let objects: Vec<u32> = found.iter().map(|f| f.0).chain(by_region.iter().map(|f| f.0)).collect();
+    let start = Instant::now();
     let (hits, n) = aim.hits_by_point(&objects);
+    phases.hit_counts = start.elapsed().as_secs_f64();
     cast += n;
     // The place each is measured from: a probe point, or (after them) a region ray's origin.
     let met_at = found.iter().map(|f| (f.1, None)).chain(by_region.iter().map(|f| (points.len(), Some(f.1))));
+    let start = Instant::now();
     let measured: Vec<(usize, Vec3, f64, u64)> = objects
         .par_iter()
         .zip(hits.par_iter())
@@ -276,6 +286,7 @@ pub fn probe_cell(
             (at, p, dov, f)
         })
         .collect();
+    phases.footprints = start.elapsed().as_secs_f64();
     let mut footprint_rays = 0;
     let mut by_point: HashMap<usize, (Vec3, Vec<(u32, f64)>)> = HashMap::new();
     for (&object, (at, p, dov, footprint)) in objects.iter().zip(measured) {
@@ -291,7 +302,7 @@ pub fn probe_cell(
         .collect();
     out.sort_by_key(|p| p.1.objects[0].0);
     let (at, points) = out.into_iter().unzip();
-    CellProbe { points, at, rays: cast, footprint_rays }
+    CellProbe { points, at, rays: cast, footprint_rays, phases }
 }
 
 /// The objects that the region rays of `cell` ([`RegionRays`] over `sequence`) meet first from
@@ -706,6 +717,7 @@ impl CellSampler for Probe {
         if self.probing.region == 0 {
             return Ok(());
         }
+        let start = Instant::now();
         // The neighbours that are view cells (rays from inside a solid would find what no viewer
         // sees). Where the precompute refines, by lattice cell: each of its view cells casts its
         // share of the rays, and the lattice cell keeps what any of them met and from where.
@@ -748,6 +760,7 @@ impl CellSampler for Probe {
             let finds = union.into_iter().map(|(object, (origin, squares))| RegionFind { object, origin, squares });
             self.region.insert(id, finds.collect());
         }
+        tally.phases.region_rays += start.elapsed().as_secs_f64();
         Ok(())
     }
 
@@ -772,6 +785,7 @@ impl CellSampler for Probe {
         let probe = probe_cell(caster, cell.cube, &cell.view_cell(), &leads, cell.object_bounds, &self.probing);
         tally.probe_rays += probe.rays;
         tally.footprint_rays += probe.footprint_rays;
+        tally.phases.add(&probe.phases);
         self.placed = probe.at.iter().zip(&probe.points).map(|(&p, v)| (p, v.objects.iter().map(|e| e.0).collect())).collect();
         points.extend(probe.points);
         Ok(())

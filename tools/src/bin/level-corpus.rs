@@ -14,7 +14,7 @@
 //!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
 //! ```
 //!
-//! Per level: build seconds and view cells; per viewpoint whether it is refused; the faces of
+//! Per level: build seconds (and where the visibility stage's went) and view cells; per viewpoint whether it is refused; the faces of
 //! the default answer (threshold mode, default η) and of the naive one (every visible object at
 //! full detail) against the level's own PVS (the faces of every leaf in a cluster the compiler's
 //! bit vectors mark visible from the viewpoint's cluster) and against the triangles seen from
@@ -107,6 +107,8 @@ struct LevelRow {
     cells: usize,
     lattice: usize,
     build_s: f64,
+    /// Where the visibility stage's time went.
+    phases: Option<hdov::BakePhases>,
     viewpoints: usize,
     refused: usize,
     /// Per answered viewpoint: default answer faces, naive faces, PVS faces, seen triangles,
@@ -241,6 +243,7 @@ fn measure(
         cells: grid.present_count(),
         lattice: grid.cell_count(),
         build_s,
+        phases: db.manifest().visibility.as_ref().and_then(|v| v.phases.clone()),
         viewpoints: views.len(),
         refused: 0,
         answered: Vec::new(),
@@ -335,6 +338,9 @@ fn print_level(r: &LevelRow) {
         "{} (--objects {}): {} triangles, {} objects, {} view cells (lattice {}), built in {:.1} s; {} viewpoints, {} refused",
         r.name, r.parts, r.triangles, r.objects, r.cells, r.lattice, r.build_s, r.viewpoints, r.refused
     );
+    if let Some(phases) = &r.phases {
+        println!("  visibility phases: {phases}");
+    }
     let [missed, thin] = r.missed_texels;
     println!("  {thin} of the {missed} texels its answers missed lie in features one texel wide");
 }
