@@ -33,14 +33,18 @@ pub struct VisibilityInfo {
 /// Wall seconds of the visibility stage's phases, each summed over the cells (a phase runs
 /// parallel inside): where a bake's time goes. What they leave of [`VisibilityInfo::seconds`] is
 /// opening the backend (its BVHs), the floors, combining the views and writing the layouts.
+/// A phase a manifest does not name (one added later) reads as 0.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct BakePhases {
     /// Cube maps at the cells' corners.
     pub corners: f64,
     /// The samplers' own cube maps (interior and adaptive points).
     pub points: f64,
-    /// Region and border rays (ray probing, before the cells).
+    /// Region rays, or region views where the GPU draws them (ray probing, before the cells).
     pub region_rays: f64,
+    /// Border rays around the region rays' rare finds (ray probing, before the cells).
+    pub border_rays: f64,
     /// Rays aimed at candidates until each is met or has used its points (ray probing).
     pub search: f64,
     /// Rays that count which point sees each found object most (ray probing).
@@ -61,11 +65,12 @@ impl std::fmt::Display for BakePhases {
 
 impl BakePhases {
     /// The phases as (name, seconds), in the order they run.
-    pub fn named(&self) -> [(&'static str, f64); 7] {
+    pub fn named(&self) -> [(&'static str, f64); 8] {
         [
             ("corners", self.corners),
             ("points", self.points),
             ("region rays", self.region_rays),
+            ("border rays", self.border_rays),
             ("search", self.search),
             ("hit counts", self.hit_counts),
             ("footprints", self.footprints),
@@ -78,6 +83,7 @@ impl BakePhases {
         self.corners += o.corners;
         self.points += o.points;
         self.region_rays += o.region_rays;
+        self.border_rays += o.border_rays;
         self.search += o.search;
         self.hit_counts += o.hit_counts;
         self.footprints += o.footprints;

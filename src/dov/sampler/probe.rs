@@ -717,7 +717,6 @@ impl CellSampler for Probe {
         if self.probing.region == 0 {
             return Ok(());
         }
-        let start = Instant::now();
         // The neighbours that are view cells (rays from inside a solid would find what no viewer
         // sees). Where the precompute refines, by lattice cell: each of its view cells casts its
         // share of the rays, and the lattice cell keeps what any of them met and from where.
@@ -740,6 +739,7 @@ impl CellSampler for Probe {
             let mut union: BTreeMap<u32, (Vec3, u64)> = BTreeMap::new();
             for cell in cells {
                 // Drawn where the backend draws region views (the GPU), else cast.
+                let start = Instant::now();
                 let met = match backend.region_views(&cell, count) {
                     Some(drawn) => {
                         let (views, ids) = drawn?;
@@ -751,7 +751,10 @@ impl CellSampler for Probe {
                         region_rays_met(backend.ray_caster().expect("checked above"), &cell, &sequence)
                     }
                 };
+                tally.phases.region_rays += start.elapsed().as_secs_f64();
+                let start = Instant::now();
                 let (finds, border) = border_finds(backend.ray_caster().expect("checked above"), &cell, met, budget);
+                tally.phases.border_rays += start.elapsed().as_secs_f64();
                 tally.probe_rays += border;
                 for f in finds {
                     union.entry(f.object).or_insert((f.origin, 0)).1 |= f.squares;
@@ -760,7 +763,6 @@ impl CellSampler for Probe {
             let finds = union.into_iter().map(|(object, (origin, squares))| RegionFind { object, origin, squares });
             self.region.insert(id, finds.collect());
         }
-        tally.phases.region_rays += start.elapsed().as_secs_f64();
         Ok(())
     }
 
