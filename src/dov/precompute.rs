@@ -328,15 +328,11 @@ pub fn precompute_shard(
                 // A sampler that cannot place its findings, or none (the corners alone: a
                 // quarter has 2 of them), leaves the view cell what the whole cell sees.
                 let mut placed = !samplers.is_empty();
-                let start = Instant::now();
                 for sampler in &mut samplers {
                     match sampler.refine(backend, &site, child_places, &seen, &candidates, &mut tally)? {
                         Some(refined) => seen = refined,
                         None => placed = false,
                     }
-                }
-                if !samplers.is_empty() {
-                    tally.phases.refine += start.elapsed().as_secs_f64();
                 }
                 if !placed {
                     seen.extend(&seen_whole);

@@ -802,6 +802,7 @@ impl CellSampler for Probe {
         candidates: &[u32],
         tally: &mut Tally,
     ) -> Result<Option<HashSet<u32>>> {
+        let start = Instant::now();
         let caster = backend.ray_caster().expect("prepare refuses a backend without a ray caster");
         let part = ViewCell { bounds: cell.bounds, places };
         let here = |p: Vec3| places >> part.square_of(p) & 1 == 1;
@@ -836,6 +837,7 @@ impl CellSampler for Probe {
             tally.probe_rays += cast + 26 * points.len() as u64;
             found.extend(met.into_iter().map(|m| m.0));
         }
+        tally.phases.refine += start.elapsed().as_secs_f64();
         Ok(Some(found))
     }
 

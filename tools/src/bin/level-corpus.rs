@@ -14,14 +14,15 @@
 //!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
 //! ```
 //!
-//! Per level: build seconds (and where the visibility stage's went) and view cells; per viewpoint whether it is refused; the faces of
-//! the default answer (threshold mode, default η) and of the naive one (every visible object at
-//! full detail) against the level's own PVS (the faces of every leaf in a cluster the compiler's
-//! bit vectors mark visible from the viewpoint's cluster) and against the triangles seen from
-//! the viewpoint (a full id cube map of every triangle at `--truth` texels per edge, by the CPU
-//! tracer); the wrong share (solid angle of texels whose object the naive answer lacks, over all
-//! texels that show a surface) as mean, p99 and max; and how many of the missed texels lie in
-//! features one texel wide (hairline cracks and slivers, which no sampling of a cell finds).
+//! Per level: build seconds (and where the visibility stage's went) and view cells; per viewpoint
+//! whether it is refused; the faces of the default answer (threshold mode, default η) and of the
+//! naive one (every visible object at full detail) against the level's own PVS (the faces of every
+//! leaf in a cluster the compiler's bit vectors mark visible from the viewpoint's cluster) and
+//! against the triangles seen from the viewpoint (a full id cube map of every triangle at `--truth`
+//! texels per edge, by the CPU tracer); the wrong share (solid angle of texels whose object the
+//! naive answer lacks, over all texels that show a surface) as mean, p99 and max; and how many of
+//! the missed texels lie in features one texel wide (hairline cracks and slivers, which no sampling
+//! of a cell finds).
 
 use std::collections::HashSet;
 use std::io::Write;
