@@ -477,6 +477,28 @@ impl ViewGrid {
         Some(c)
     }
 
+    /// The lattice cells whose boxes may meet `b`, as their lowest and highest coordinates: one
+    /// cell more on every side than the division gives, so that rounding leaves none out (the
+    /// whole span of an axis where `b` is NaN there); `None` where `b` lies beyond that.
+    pub fn lattice_span(&self, b: &Aabb) -> Option<[[u32; 3]; 2]> {
+        let s = self.cell_size();
+        let (mut lo, mut hi) = ([0u32; 3], [0u32; 3]);
+        for a in 0..3 {
+            let last = self.dims[a].saturating_sub(1) as f32;
+            let from = ((b.min[a] - self.region.min[a]) / s[a]).floor() - 1.0;
+            let to = ((b.max[a] - self.region.min[a]) / s[a]).floor() + 1.0;
+            if from.is_nan() || to.is_nan() {
+                (lo[a], hi[a]) = (0, last as u32);
+            } else if to < 0.0 || from > last {
+                return None;
+            } else {
+                // Saturating casts: an infinite end is the lattice's edge.
+                (lo[a], hi[a]) = (from.max(0.0) as u32, to.min(last) as u32);
+            }
+        }
+        Some([lo, hi])
+    }
+
     /// The centre of every cell, by cell id.
     pub fn cell_centres(&self) -> Vec<Vec3> {
         (0..self.cell_count()).map(|id| self.cell_box(self.cell_coords(id)).center()).collect()
@@ -704,6 +726,37 @@ mod tests {
                 for k in 0..64u32 {
                     let u = Vec3::new((k as f32 + 0.5) / 64.0, 0.5, ((k * 29 % 64) as f32 + 0.5) / 64.0);
                     proptest::prop_assert!(b.contains_point(cell.point(u)));
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// Every lattice cell whose box meets a box lies in the box's span, wherever the box
+        /// lies against the region (inside, across its faces, outside, infinite on a side).
+        #[test]
+        fn a_span_holds_every_cell_a_box_meets(
+            origin in proptest::array::uniform3(-1000.0f32..1000.0),
+            size in proptest::array::uniform3(0.1f32..50.0),
+            dims in proptest::array::uniform3(1u32..12),
+            at in proptest::array::uniform3(-0.5f32..1.5),
+            extent in proptest::array::uniform3(0.0f32..0.8),
+            open_side in 0usize..8,
+        ) {
+            let (origin, size) = (Vec3::from(origin), Vec3::from(size));
+            let g = ViewGrid::new(Aabb::new(origin, origin + size * UVec3::from(dims).as_vec3()), dims);
+            let extent_of_region = g.region.extent();
+            let min = origin + Vec3::from(at) * extent_of_region;
+            let mut b = Aabb::new(min, min + Vec3::from(extent) * extent_of_region);
+            if open_side < 3 {
+                b.max[open_side] = f32::INFINITY;
+            }
+            let span = g.lattice_span(&b);
+            for id in 0..g.lattice_count() {
+                let c = g.cell_coords(id);
+                if g.cell_box(c).intersects(&b) {
+                    let [lo, hi] = span.expect("a box that meets a cell has a span");
+                    proptest::prop_assert!((0..3).all(|a| lo[a] <= c[a] && c[a] <= hi[a]), "{:?} outside {:?}", c, [lo, hi]);
                 }
             }
         }

@@ -338,7 +338,8 @@ fn a_part_of_a_cell_sees_no_more_than_the_whole() {
     let no_floor = PrecomputeOptions { zero_dov_tests: vec![], ..Default::default() };
     let whole = cell_dov(&points, &[], &cell, &bounds, &shape, &no_floor, &cube);
     assert!((whole.node(1).0 - 0.35).abs() < 1e-6);
-    let context = |options| CellContext { around: &[], object_bounds: &bounds, shape: &shape, options, cube: &cube };
+    let context =
+        |options| CellContext { around: &[], object_bounds: &bounds, near: None, shape: &shape, options, cube: &cube };
     let seen = |objects: &[u32]| objects.iter().copied().collect::<std::collections::HashSet<u32>>();
 
     let one = part_dov(&seen(&[0]), &whole, &part, &context(&no_floor));

@@ -14,15 +14,16 @@
 //!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
 //! ```
 //!
-//! Per level: build seconds (and where the visibility stage's went) and view cells; per viewpoint
-//! whether it is refused; the faces of the default answer (threshold mode, default η) and of the
-//! naive one (every visible object at full detail) against the level's own PVS (the faces of every
-//! leaf in a cluster the compiler's bit vectors mark visible from the viewpoint's cluster) and
-//! against the triangles seen from the viewpoint (a full id cube map of every triangle at `--truth`
-//! texels per edge, by the CPU tracer); the wrong share (solid angle of texels whose object the
-//! naive answer lacks, over all texels that show a surface) as mean, p99 and max; and how many of
-//! the missed texels lie in features one texel wide (hairline cracks and slivers, which no sampling
-//! of a cell finds).
+//! Per level: build seconds (the LOD and visibility stages', and where the visibility stage's went)
+//! and view cells; per viewpoint whether it is refused; the faces of the default answer (threshold
+//! mode, default η) and of the naive one (every visible object at full detail) against the level's
+//! own PVS (the faces of every leaf in a cluster the compiler's bit vectors mark visible from the
+//! viewpoint's cluster) and against the triangles seen from the viewpoint (a full id cube map of
+//! every triangle at `--truth` texels per edge, by the CPU tracer); the wrong share (solid angle of
+//! texels whose object the naive answer lacks, over all texels that show a surface) as mean, p99
+//! and max; and how many of the missed texels lie in features one texel wide (hairline cracks and
+//! slivers, which no sampling of a cell finds), and how many show a surface from behind (the back
+//! of a wall seen through a crack in the wall in front of it).
 
 use std::collections::HashSet;
 use std::io::Write;
@@ -31,7 +32,7 @@ use std::time::Instant;
 
 use clap::Parser;
 use glam::Vec3;
-use hdov::dov::IdCube;
+use hdov::dov::{BACK_FACE_BIT, IdCube};
 use hdov::scene::standable::height_at;
 use hdov::{
     BackendKind, BuildParams, Database, EyeHeights, FloorTest, ItemKind, Mode, ObjectParts, Overwrite, Progress,
@@ -108,6 +109,9 @@ struct LevelRow {
     cells: usize,
     lattice: usize,
     build_s: f64,
+    /// Seconds of the build's LOD and visibility stages (the rest: the grid, the tree, writing).
+    lod_s: f64,
+    visibility_s: f64,
     /// Where the visibility stage's time went.
     phases: Option<hdov::BakePhases>,
     viewpoints: usize,
@@ -115,9 +119,9 @@ struct LevelRow {
     /// Per answered viewpoint: default answer faces, naive faces, PVS faces, seen triangles,
     /// wrong share.
     answered: Vec<[f64; 5]>,
-    /// Texels of the truth the naive answers lack, and of them those in features one texel
-    /// wide ([`thin_misses`]), over all viewpoints.
-    missed_texels: [usize; 2],
+    /// Texels of the truth the naive answers lack, of them those in features one texel wide,
+    /// and those that show a back face ([`thin_misses`]), over all viewpoints.
+    missed_texels: [usize; 3],
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -224,7 +228,7 @@ fn measure(
     };
     let dir = work.join(format!("{name}-{parts}.hdov"));
     let start = Instant::now();
-    hdov::build(scene, &dir, &params, Overwrite::Ours, &Progress::hidden())?;
+    let report = hdov::build(scene, &dir, &params, Overwrite::Ours, &Progress::hidden())?;
     let build_s = start.elapsed().as_secs_f64();
     let db = Database::open(&dir)?;
     let grid = db.grid().cloned().ok_or("built without a grid")?;
@@ -244,11 +248,13 @@ fn measure(
         cells: grid.present_count(),
         lattice: grid.cell_count(),
         build_s,
+        lod_s: report.lod_seconds,
+        visibility_s: report.manifest.visibility.as_ref().map_or(0.0, |v| v.seconds),
         phases: db.manifest().visibility.as_ref().and_then(|v| v.phases.clone()),
         viewpoints: views.len(),
         refused: 0,
         answered: Vec::new(),
-        missed_texels: [0, 0],
+        missed_texels: [0; 3],
     };
     for (k, (class, eye)) in views.iter().enumerate() {
         let pvs = level.and_then(|l| l.cluster_at(*eye).map(|c| l.pvs_triangles(c) as f64)).unwrap_or(f64::NAN);
@@ -272,12 +278,14 @@ fn measure(
         let answered = |t: u32| has.contains(&parent[t as usize]);
         let lacking = wrong_share(&ids, &cube, answered);
         let wrong = lacking.share();
-        let [missed, thin] = thin_misses(&ids, answered);
-        row.missed_texels[0] += missed;
-        row.missed_texels[1] += thin;
+        let misses = thin_misses(&ids, answered);
+        row.missed_texels.iter_mut().zip(misses).for_each(|(sum, n)| *sum += n);
+        let [missed, thin, back] = misses;
         if args.explain.is_some_and(|bound| wrong > bound) {
             explain(&measured, &grid, *eye, &lacking, &parent);
-            println!("    {thin} of its {missed} missed texels lie in features one texel wide");
+            println!(
+                "    {thin} of its {missed} missed texels lie in features one texel wide, {back} show a back face"
+            );
         }
         let faces = |a: &hdov::Answer| a.items.iter().map(|i| f64::from(i.faces)).sum::<f64>();
         let m = [faces(&answer), faces(&naive), pvs, seen.len() as f64, wrong];
@@ -339,30 +347,35 @@ fn print_level(r: &LevelRow) {
         "{} (--objects {}): {} triangles, {} objects, {} view cells (lattice {}), built in {:.1} s; {} viewpoints, {} refused",
         r.name, r.parts, r.triangles, r.objects, r.cells, r.lattice, r.build_s, r.viewpoints, r.refused
     );
+    println!("  LODs {:.1} s, visibility {:.1} s", r.lod_s, r.visibility_s);
     if let Some(phases) = &r.phases {
         println!("  visibility phases: {phases}");
     }
-    let [missed, thin] = r.missed_texels;
-    println!("  {thin} of the {missed} texels its answers missed lie in features one texel wide");
+    let [missed, thin, back] = r.missed_texels;
+    println!(
+        "  {thin} of the {missed} texels its answers missed lie in features one texel wide, {back} show a back face"
+    );
 }
 
 /// Of the texels of `ids` (a cube map by triangle) whose triangle `has`
-/// does not take, how many there are, and how many lie in a feature one texel wide: their
-/// neighbours on both sides along the row or along the column are not missed. A hairline crack
-/// between faces, or a sliver, shows as such single texels and lines; a gap a viewer sees
-/// through does not.
-fn thin_misses(ids: &IdCube, has: impl Fn(u32) -> bool) -> [usize; 2] {
+/// does not take, how many there are, how many lie in a feature one texel wide (their
+/// neighbours on both sides along the row or along the column are not missed), and how many
+/// show their triangle from behind. A hairline crack between faces, or a sliver, shows as such
+/// single texels and lines; a gap a viewer sees through does not. A back face in a closed level
+/// is seen only through such a crack in the surface in front of it.
+fn thin_misses(ids: &IdCube, has: impl Fn(u32) -> bool) -> [usize; 3] {
     let r = ids.resolution as usize;
     let missed = |t: usize| ids.object_at(t).is_some_and(|tri| !has(tri));
-    let (mut all, mut thin) = (0, 0);
+    let (mut all, mut thin, mut back) = (0, 0, 0);
     for t in (0..ids.ids.len()).filter(|&t| missed(t)) {
         let (row, col) = (t % (r * r) / r, t % r);
         let across = col > 0 && col + 1 < r && !missed(t - 1) && !missed(t + 1);
         let along = row > 0 && row + 1 < r && !missed(t - r) && !missed(t + r);
         all += 1;
         thin += usize::from(across || along);
+        back += usize::from(ids.ids[t] & BACK_FACE_BIT != 0);
     }
-    [all, thin]
+    [all, thin, back]
 }
 
 fn print_table(rows: &[LevelRow]) {
