@@ -499,6 +499,12 @@ impl ViewGrid {
         Some([lo, hi])
     }
 
+    /// The ids of the lattice cells of a span ([`ViewGrid::lattice_span`]); x fastest, then z,
+    /// then y.
+    pub fn lattice_cells(&self, [lo, hi]: [[u32; 3]; 2]) -> Vec<usize> {
+        lattice_block(|a| lo[a]..=hi[a], |p| self.cell_id(p))
+    }
+
     /// The centre of every cell, by cell id.
     pub fn cell_centres(&self) -> Vec<Vec3> {
         (0..self.cell_count()).map(|id| self.cell_box(self.cell_coords(id)).center()).collect()

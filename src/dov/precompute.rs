@@ -388,7 +388,7 @@ const REFINED_TAKES_WHOLE: f64 = 0.8;
 /// found once per shard. Testing every object in every cell cost cells × objects, serially: 3 s
 /// of a 57 s build of a 2,000-part level (dm4ish), and it grows as the square of a scene's size.
 struct NearBoxes {
-    /// By lattice cell id, for the cells sampled (empty without a box test).
+    /// By lattice cell id, for the cells sampled (none without a box test).
     by_cell: HashMap<usize, Vec<u32>>,
     /// Objects that span more than [`NearBoxes::WIDE`] lattice cells: near every cell.
     wide: Vec<u32>,
@@ -400,31 +400,27 @@ impl NearBoxes {
     const WIDE: u64 = 4096;
 
     fn new(grid: &ViewGrid, object_bounds: &[Aabb], options: &PrecomputeOptions, cells: impl Iterator<Item = usize>) -> Self {
-        let mut near = NearBoxes { by_cell: cells.map(|id| (id, Vec::new())).collect(), wide: Vec::new() };
         let margins = options.zero_dov_tests.iter().filter_map(|t| match *t {
             FloorTest::BoxWithin(m) => Some(m),
             _ => None,
         });
         let Some(margin) = margins.reduce(f32::max) else {
-            return near;
+            return NearBoxes { by_cell: HashMap::new(), wide: Vec::new() };
         };
+        let mut near = NearBoxes { by_cell: cells.map(|id| (id, Vec::new())).collect(), wide: Vec::new() };
         let m = Vec3::splat(margin);
         for (object, bounds) in object_bounds.iter().enumerate() {
             // An empty box meets nothing ([`FloorTest::finds`]).
             let span = if bounds.is_empty() { None } else { grid.lattice_span(&Aabb::new(bounds.min - m, bounds.max + m)) };
-            let Some([lo, hi]) = span else { continue };
+            let Some(span @ [lo, hi]) = span else { continue };
             let count: u64 = (0..3).map(|a| u64::from(hi[a] - lo[a] + 1)).product();
             if count > Self::WIDE {
                 near.wide.push(object as u32);
                 continue;
             }
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    for x in lo[0]..=hi[0] {
-                        if let Some(list) = near.by_cell.get_mut(&grid.cell_id([x, y, z])) {
-                            list.push(object as u32);
-                        }
-                    }
+            for id in grid.lattice_cells(span) {
+                if let Some(list) = near.by_cell.get_mut(&id) {
+                    list.push(object as u32);
                 }
             }
         }

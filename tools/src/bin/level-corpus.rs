@@ -120,7 +120,7 @@ struct LevelRow {
     /// wrong share.
     answered: Vec<[f64; 5]>,
     /// Texels of the truth the naive answers lack, of them those in features one texel wide,
-    /// and those that show a back face ([`thin_misses`]), over all viewpoints.
+    /// and those that show a back face ([`count_misses`]), over all viewpoints.
     missed_texels: [usize; 3],
 }
 
@@ -250,7 +250,7 @@ fn measure(
         build_s,
         lod_s: report.lod_seconds,
         visibility_s: report.manifest.visibility.as_ref().map_or(0.0, |v| v.seconds),
-        phases: db.manifest().visibility.as_ref().and_then(|v| v.phases.clone()),
+        phases: report.manifest.visibility.and_then(|v| v.phases),
         viewpoints: views.len(),
         refused: 0,
         answered: Vec::new(),
@@ -278,7 +278,7 @@ fn measure(
         let answered = |t: u32| has.contains(&parent[t as usize]);
         let lacking = wrong_share(&ids, &cube, answered);
         let wrong = lacking.share();
-        let misses = thin_misses(&ids, answered);
+        let misses = count_misses(&ids, answered);
         row.missed_texels.iter_mut().zip(misses).for_each(|(sum, n)| *sum += n);
         let [missed, thin, back] = misses;
         if args.explain.is_some_and(|bound| wrong > bound) {
@@ -363,7 +363,7 @@ fn print_level(r: &LevelRow) {
 /// show their triangle from behind. A hairline crack between faces, or a sliver, shows as such
 /// single texels and lines; a gap a viewer sees through does not. A back face in a closed level
 /// is seen only through such a crack in the surface in front of it.
-fn thin_misses(ids: &IdCube, has: impl Fn(u32) -> bool) -> [usize; 3] {
+fn count_misses(ids: &IdCube, has: impl Fn(u32) -> bool) -> [usize; 3] {
     let r = ids.resolution as usize;
     let missed = |t: usize| ids.object_at(t).is_some_and(|tri| !has(tri));
     let (mut all, mut thin, mut back) = (0, 0, 0);
