@@ -76,8 +76,8 @@ pub use export::tiles;
 pub use export::{lod_glb, scene_items, write_answer_glb, write_scene_glb};
 pub use format::catalog::LodRef;
 pub use format::params::{
-    AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, FloorTest, InternalLods,
-    LodParams, ObjectParts, RayProbing, Sampling, Shard, VisibilityParams,
+    AdaptiveSampling, BackendKind, BuildParams, DEFAULT_FANOUT, DEFAULT_LOD_TOLERANCE_TEXELS, DEFAULT_SLOT_BUDGET,
+    FloorTest, InternalLods, LodParams, ObjectParts, RayProbing, Sampling, Shard, VisibilityParams,
 };
 pub use format::{BakePhases, Manifest};
 pub use geom::Aabb;

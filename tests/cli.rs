@@ -32,6 +32,19 @@ fn generate_build_info_round_trip() {
     assert!(o.status.success(), "{}", stderr(&o));
     let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("build --json prints one JSON document");
     assert!(report["manifest"]["counts"]["nodes"].as_u64().unwrap() > 1);
+    // Without --layouts, the slot budget of decision 134 holds (the tiny city's slots pass
+    // none of it); naming layouts writes them whatever their size.
+    let visibility = &report["manifest"]["build"]["visibility"];
+    assert_eq!(visibility["slot_budget"].as_u64(), Some(hdov::DEFAULT_SLOT_BUDGET));
+    assert_eq!(visibility["layouts"], serde_json::json!(["horizontal", "vertical", "indexed-vertical"]));
+    assert_eq!(report["manifest"]["visibility"]["layouts"].as_array().unwrap().len(), 3);
+    let named = tmp.path().join("named");
+    let args =
+        ["build", scene.to_str().unwrap(), "--out", named.to_str().unwrap(), "--layouts", "horizontal", "--json"];
+    let o = hdov(&[&args[..], &["--page-size", "512"]].concat());
+    let named: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(named["manifest"]["build"]["visibility"].get("slot_budget").is_none(), "{named}");
+    assert_eq!(named["manifest"]["visibility"]["layouts"][0]["name"], "horizontal");
     let o = hdov(&["info", db.to_str().unwrap(), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();

@@ -89,3 +89,80 @@ fn layouts_agree_with_each_other_and_with_the_precompute() {
         assert_eq!(io.requested, io.hits + io.pages_read, "{io:?}");
     }
 }
+
+/// The slot budget (decision 134) leaves out the layouts whose slots for every (node, cell)
+/// would pass it, says so in the manifest and in the error of a query that asks for one, and
+/// changes no answer; the merge of shards leaves out the same layouts as the whole build.
+#[test]
+fn a_slot_budget_leaves_out_the_layouts_that_would_pass_it() {
+    let scene = hdov::city::generate(&CityParams { seed: 3, scale: CityScale::Tiny, ..Default::default() }).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let v = |slot_budget, layouts: &[LayoutKind], shard| VisibilityParams {
+        resolution: RESOLUTION,
+        backend: BackendKind::Cpu,
+        slot_budget,
+        layouts: layouts.to_vec(),
+        shard,
+        ..Default::default()
+    };
+    let build = |name: &str, visibility: Option<VisibilityParams>| {
+        let dir = tmp.path().join(name);
+        let params = BuildParams { page_size: 512, visibility, ..Default::default() };
+        hdov::build(&scene, &dir, &params, Overwrite::Never, &Progress::hidden()).unwrap();
+        dir
+    };
+    let open = |dir: std::path::PathBuf| Database::open(&dir).unwrap();
+    let left_out = |db: &Database| -> Vec<(String, u64)> {
+        db.manifest().visibility.as_ref().unwrap().left_out.iter().map(|l| (l.name.clone(), l.slot_bytes)).collect()
+    };
+    let all = open(build("all", Some(v(None, &LayoutKind::ALL, None))));
+    assert_eq!(all.layouts(), LayoutKind::ALL.to_vec());
+    assert!(left_out(&all).is_empty());
+
+    let none = open(build("none", Some(v(Some(1), &LayoutKind::ALL, None))));
+    assert_eq!(none.layouts(), vec![LayoutKind::IndexedVertical]);
+    let out = left_out(&none);
+    assert_eq!(out.iter().map(|l| l.0.as_str()).collect::<Vec<_>>(), ["horizontal", "vertical"]);
+    // What the left-out layouts would have taken is what the whole build wrote of them: the
+    // horizontal layout's V-pages are all slots; vertical's segments are part of its index.
+    let written = all.info().unwrap().layouts;
+    assert_eq!(out[0].1, written[&LayoutKind::Horizontal].vpage_bytes);
+    assert!(out[1].1 > 0 && out[1].1 < written[&LayoutKind::Vertical].bytes, "{out:?}");
+    let horizontal = |q: hdov::QueryParams| hdov::QueryParams { layout: Some(LayoutKind::Horizontal), ..q };
+    let at = scene.grid.as_ref().unwrap().cell_centres()[0];
+    let err = none.query(at, &horizontal(Default::default())).err().unwrap().to_string();
+    assert!(err.contains("holds no horizontal layout") && err.contains(&out[0].1.to_string()), "{err}");
+    let naive = hdov::QueryParams { mode: hdov::Mode::Naive, ..Default::default() };
+    for at in scene.grid.as_ref().unwrap().cell_centres() {
+        for q in [naive, hdov::QueryParams::default()] {
+            let (got, want) = (none.query(at, &q).unwrap(), all.query(at, &horizontal(q)).unwrap());
+            assert!(!want.items.is_empty() && got.items == want.items, "{at}");
+        }
+    }
+
+    // A budget between the two: vertical's slots fit, horizontal's do not.
+    let between = open(build("between", Some(v(Some(out[1].1), &LayoutKind::ALL, None))));
+    assert_eq!(between.layouts(), vec![LayoutKind::Vertical, LayoutKind::IndexedVertical]);
+    assert_eq!(left_out(&between), out[..1]);
+    // Without indexed-vertical asked for, the budget leaves nothing out.
+    let alone = open(build("alone", Some(v(Some(1), &[LayoutKind::Horizontal], None))));
+    assert_eq!(alone.layouts(), vec![LayoutKind::Horizontal]);
+
+    let base = build("base", None);
+    let shards: Vec<_> = (0..2)
+        .map(|i| build(&format!("shard{i}"), Some(v(Some(1), &LayoutKind::ALL, Some(hdov::Shard::new(i, 2).unwrap())))))
+        .collect();
+    let merged = tmp.path().join("merged");
+    hdov::merge(&base, &shards, &merged, Overwrite::Never).unwrap();
+    let merged = open(merged);
+    assert_eq!(merged.layouts(), vec![LayoutKind::IndexedVertical]);
+    assert_eq!(left_out(&merged), out);
+
+    // A manifest whose written and left-out layouts do not add up to those asked for is refused.
+    let path = tmp.path().join("none/manifest.json");
+    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    json["visibility"]["left_out"][1]["name"] = "indexed-vertical".into();
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let err = Database::open(&tmp.path().join("none")).err().unwrap().to_string();
+    assert!(err.contains("left out"), "{err}");
+}

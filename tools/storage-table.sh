@@ -8,7 +8,7 @@ hdov=${HDOV:-target/release/hdov}
 work=${WORK:-/tmp/hdov-storage-$scale}
 mkdir -p "$work"
 [ -f "$work/city/city.json" ] || "$hdov" generate city --scale "$scale" --out "$work/city" >/dev/null
-"$hdov" build "$work/city/city.json" --out "$work/db" --force "$@" >/dev/null
+"$hdov" build "$work/city/city.json" --out "$work/db" --force --layouts horizontal,vertical,indexed-vertical "$@" >/dev/null
 "$hdov" info "$work/db" --json | python3 -c '
 import json, sys
 d = json.load(sys.stdin)

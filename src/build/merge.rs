@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use hdov_storage::{Layout, LayoutKind, LayoutWriter, ReadMode, VShape};
 
 use super::vpages::for_each_cell;
-use super::{VisibilityParams, begin_write, layout_info, layout_options, write_manifest};
+use super::{VisibilityParams, begin_write, layout_info, layout_options, layouts_for, write_manifest};
 use crate::db::Database;
 use crate::dov::precompute::Shard;
 use crate::error::{Error, Param, Result};
@@ -123,7 +123,8 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         nvo_max: if wide { u32::MAX } else { u32::from(u16::MAX) },
     };
     let opts = layout_options(base_manifest.build.page_size, first.params.dov_codec);
-    let kinds = &first.params.layouts;
+    let params = VisibilityParams { shard: None, ..first.params.clone() };
+    let (kinds, left_out) = layouts_for(&params, &shape, &opts);
     let mut writers =
         kinds.iter().map(|&k| LayoutWriter::create(txn.path(), k, &shape, &opts)).collect::<Result<Vec<_>, _>>()?;
     let mut info = VisibilityInfo {
@@ -133,6 +134,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         skipped_points: 0,
         seconds: 0.0,
         phases: Some(BakePhases::default()),
+        left_out,
         ..first.info.clone()
     };
     let mut in_order: Vec<&ShardDir> = dirs.iter().collect();
@@ -175,7 +177,7 @@ pub fn merge(base: &Path, shards: &[PathBuf], out: &Path, overwrite: Overwrite) 
         .map(|(&kind, w)| Ok(layout_info(kind, w.finish()?)))
         .collect::<Result<_>>()?;
     let mut manifest = base_manifest.clone();
-    manifest.build.visibility = Some(VisibilityParams { shard: None, ..first.params.clone() });
+    manifest.build.visibility = Some(params);
     manifest.visibility = Some(info);
     write_manifest(txn.path(), &manifest)?;
     txn.commit()?;

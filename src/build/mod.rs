@@ -25,7 +25,7 @@ pub use crate::format::params::{BuildParams, DEFAULT_FANOUT, ObjectParts, Visibi
 use crate::format::tree_page::{self, NodePage};
 use crate::format::{
     CATALOG_FILE, CATALOG_KIND, Counts, FORMAT_VERSION, FileChecksum, FileEntry, GEOMETRY_FILE, GEOMETRY_KIND, LayoutInfo,
-    MANIFEST_FILE, Manifest, SCENE_FILES, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
+    LeftOutLayout, MANIFEST_FILE, Manifest, SCENE_FILES, TREE_FILE, TREE_KIND, VisibilityInfo, is_database,
 };
 use crate::grid::ViewGrid;
 use crate::lod::LodLevel;
@@ -33,7 +33,7 @@ use crate::progress::Progress;
 use crate::rtree::RTree;
 use crate::scene::Scene;
 use crate::overwrite::Overwrite;
-use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, PageFileWriter, VData, write_layout};
+use hdov_storage::{BlobWriter, DirTxn, LayoutOptions, PageFileWriter, VData, VShape, write_layout};
 
 /// What a build did and how long each stage took.
 #[derive(Clone, Debug, Serialize)]
@@ -384,7 +384,9 @@ fn build_visibility(
     )?;
     bar.finish_and_clear();
     let data = vpages::vdata_from_cells(tree, grid.cell_count() as u32, &dov.cells);
-    let layouts = write_layouts(dir, &v.stored_layouts(), &data, page_size, v.dov_codec)?;
+    let opts = layout_options(page_size, v.dov_codec);
+    let (kinds, left_out) = layouts_for(v, &VShape::of(&data), &opts);
+    let layouts = write_layouts(dir, &kinds, &data, &opts)?;
     Ok(VisibilityInfo {
         backend: backend.name(),
         cells_computed: dov.cells.len() as u64,
@@ -394,6 +396,7 @@ fn build_visibility(
         seconds: t.elapsed().as_secs_f64(),
         phases: Some(dov.phases),
         layouts,
+        left_out,
     })
 }
 
@@ -420,14 +423,35 @@ pub(crate) fn layout_info(kind: hdov_storage::LayoutKind, size: hdov_storage::La
     }
 }
 
+/// Of the layouts `v` stores, those a build of `shape` written with `opts` writes, and those its
+/// [slot budget](VisibilityParams::slot_budget) leaves out, with the bytes their slots would
+/// have taken (decision 134).
+pub(crate) fn layouts_for(
+    v: &VisibilityParams,
+    shape: &VShape,
+    opts: &LayoutOptions,
+) -> (Vec<hdov_storage::LayoutKind>, Vec<LeftOutLayout>) {
+    let asked = v.stored_layouts();
+    let budget = v.slot_budget.filter(|_| asked.contains(&hdov_storage::LayoutKind::IndexedVertical));
+    let mut written = Vec::new();
+    let mut left_out = Vec::new();
+    for kind in asked {
+        match budget.map(|b| (b, shape.slot_bytes(kind, opts))) {
+            Some((b, slot_bytes)) if slot_bytes > b => {
+                left_out.push(LeftOutLayout { name: kind.name().to_string(), slot_bytes })
+            }
+            _ => written.push(kind),
+        }
+    }
+    (written, left_out)
+}
+
 /// Writes every chosen layout of `data` into `dir`.
 pub(crate) fn write_layouts(
     dir: &Path,
     kinds: &[hdov_storage::LayoutKind],
     data: &VData,
-    page_size: u32,
-    codec: hdov_storage::DovCodec,
+    opts: &LayoutOptions,
 ) -> Result<Vec<LayoutInfo>> {
-    let opts = layout_options(page_size, codec);
-    kinds.iter().map(|&kind| Ok(layout_info(kind, write_layout(dir, kind, data, &opts)?))).collect()
+    kinds.iter().map(|&kind| Ok(layout_info(kind, write_layout(dir, kind, data, opts)?))).collect()
 }

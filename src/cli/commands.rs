@@ -129,9 +129,11 @@ pub struct VisibilityArgs {
     /// build instead of building them again (the shard then costs only its cells' visibility).
     #[arg(long, requires = "shard")]
     base: Option<PathBuf>,
-    /// V-page layouts to write, comma-separated.
-    #[arg(long, default_value = "horizontal,vertical,indexed-vertical", value_delimiter = ',')]
-    layouts: Vec<LayoutKind>,
+    /// V-page layouts to write, comma-separated [default: horizontal,vertical,indexed-vertical,
+    /// leaving horizontal and vertical out where their slots for every node in every cell would
+    /// take over 512 MiB; name them here to write them whatever their size].
+    #[arg(long, value_delimiter = ',')]
+    layouts: Option<Vec<LayoutKind>>,
     /// How V-entries store DoV: f32, or log-u16 (smaller; error bound in docs/storage-format.md).
     #[arg(long, default_value = "f32")]
     dov_codec: DovCodec,
@@ -173,7 +175,8 @@ impl VisibilityArgs {
             resolution: self.resolution,
             backend: self.backend,
             sampling: self.samples,
-            layouts: self.layouts.clone(),
+            layouts: self.layouts.clone().unwrap_or_else(|| LayoutKind::ALL.to_vec()),
+            slot_budget: if self.layouts.is_some() { None } else { Some(hdov::DEFAULT_SLOT_BUDGET) },
             dov_codec: self.dov_codec,
             shard: self.shard,
             lod_draw_tolerance: self.lod_draw_tolerance,
@@ -393,6 +396,12 @@ fn print_visibility(m: &Manifest) {
     }
     for l in &v.layouts {
         println!("    {:<17} V-pages {:>12} bytes, index {:>10} bytes", l.name, l.vpage_bytes, l.index_bytes);
+    }
+    for l in &v.left_out {
+        println!(
+            "    {:<17} left out: its slots for every node in every cell would take {} bytes (name it in --layouts to write it)",
+            l.name, l.slot_bytes
+        );
     }
 }
 

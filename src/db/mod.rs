@@ -85,8 +85,9 @@ impl Database {
             ));
         }
         catalog.check(nodes as usize, geometry.file_len()).map_err(|r| Error::bad_file(&catalog_path, r))?;
-        let kinds = manifest.build.visibility.iter().flat_map(|v| v.layouts.iter().copied());
-        let layouts = kinds
+        let layouts = manifest
+            .written_layouts()
+            .into_iter()
             .map(|kind| {
                 let layout = Layout::open(dir, kind, mode)?;
                 // Named by its first file (the index, where it has one), which records the counts.
@@ -168,7 +169,17 @@ impl Database {
         self.layouts
             .iter()
             .find(|l| l.kind() == kind)
-            .ok_or_else(|| Error::bad_param(Param::Layout, format!("{} holds no {kind} layout", self.dir.display())))
+            .ok_or_else(|| {
+                let left_out = self.manifest.visibility.iter().flat_map(|v| &v.left_out).find(|l| l.name == kind.name());
+                let why = left_out.map_or(String::new(), |l| {
+                    format!(
+                        ": its build left it out, as its slots for every node in every cell would take {} bytes \
+                         (build with --layouts naming it to write it)",
+                        l.slot_bytes
+                    )
+                });
+                Error::bad_param(Param::Layout, format!("{} holds no {kind} layout{why}", self.dir.display()))
+            })
     }
 
     /// The encoded bytes of one LOD level in `geometry.blob` (checksum verified): what a

@@ -28,6 +28,17 @@ pub struct VisibilityInfo {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub phases: Option<BakePhases>,
     pub layouts: Vec<LayoutInfo>,
+    /// Layouts asked for that the slot budget left out (decision 134).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub left_out: Vec<LeftOutLayout>,
+}
+
+/// A layout asked for but not written: its slots for every (node, cell) would have taken
+/// `slot_bytes`, more than the build's slot budget.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LeftOutLayout {
+    pub name: String,
+    pub slot_bytes: u64,
 }
 
 /// Wall seconds of the visibility stage's phases, each summed over the cells (a phase runs
@@ -199,6 +210,14 @@ impl Manifest {
     /// The value of the `hdov` key that marks a database manifest.
     pub const MAGIC: &'static str = "database";
 
+    /// The layouts the build wrote, in order: those it stores, less those the slot budget left
+    /// out (decision 134). [`Manifest::check`] holds the written list to these.
+    pub fn written_layouts(&self) -> Vec<hdov_storage::LayoutKind> {
+        let (Some(params), Some(v)) = (&self.build.visibility, &self.visibility) else { return Vec::new() };
+        let left_out = |k: &hdov_storage::LayoutKind| v.left_out.iter().any(|l| l.name == k.name());
+        params.stored_layouts().into_iter().filter(|k| !left_out(k)).collect()
+    }
+
     /// Reads and validates `DIR/manifest.json` (see [`Manifest::check`]).
     pub fn read(dir: &Path) -> Result<Manifest> {
         let path = dir.join(MANIFEST_FILE);
@@ -284,9 +303,11 @@ impl Manifest {
                 return Err(format!("{} cells computed of {}", v.cells_computed, c.cells));
             }
             let names: Vec<&str> = v.layouts.iter().map(|l| l.name.as_str()).collect();
-            let built: Vec<String> = params.stored_layouts().iter().map(|k| k.to_string()).collect();
-            if names != built {
-                return Err(format!("layouts {names:?} differ from those built, {built:?}"));
+            let built: Vec<String> = self.written_layouts().iter().map(|k| k.to_string()).collect();
+            let asked = params.stored_layouts();
+            if names != built || v.left_out.iter().any(|l| !asked.iter().any(|k| k.name() == l.name)) {
+                let left_out: Vec<&str> = v.left_out.iter().map(|l| l.name.as_str()).collect();
+                return Err(format!("layouts {names:?} and left out {left_out:?} differ from those asked for, {asked:?}"));
             }
             expected.extend(v.layouts.iter().flat_map(|l| &l.files));
         }

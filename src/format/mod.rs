@@ -19,7 +19,7 @@ pub mod params;
 pub mod sampling;
 pub mod tree_page;
 
-pub use manifest::{BakePhases, Counts, FileChecksum, FileEntry, LayoutInfo, Manifest, VisibilityInfo, is_database};
+pub use manifest::{BakePhases, Counts, FileChecksum, FileEntry, LayoutInfo, LeftOutLayout, Manifest, VisibilityInfo, is_database};
 
 /// 2: the catalog holds node shapes (the stop rule's inputs). 3: internal LODs by geometric
 /// error, and the catalog's error ladder and descent faces. 4: objects may be parts of the

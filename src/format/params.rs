@@ -309,6 +309,11 @@ pub const MAX_REGION_VIEW_RESOLUTION: u32 = 16;
 /// (docs/dov.md, "LOD-aware drawing").
 pub const DEFAULT_LOD_TOLERANCE_TEXELS: f32 = 0.05;
 
+/// The default [`VisibilityParams::slot_budget`]: 512 MiB. The horizontal layout of a level of
+/// 8,445 parts in 29,594 view cells would take 14.5 GB of slots, where indexed-vertical holds
+/// the same V-pages in 0.75 GB; the large city's 0.3 GB stays in (decision 134).
+pub const DEFAULT_SLOT_BUDGET: u64 = 512 << 20;
+
 /// Where a database's objects come from (`--objects`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ObjectParts {
@@ -410,6 +415,12 @@ pub struct VisibilityParams {
     /// instead of casting them on the CPU; 0 = cast them (the reference).
     #[serde(default)]
     pub region_views: u32,
+    /// Leave the horizontal and vertical layouts out where their slots for every (node, cell),
+    /// seen or not ([`hdov_storage::VShape::slot_bytes`]), would take more than this many bytes; `None` writes
+    /// every layout asked for. Applies only where indexed-vertical, which has no such slots and
+    /// is what queries read by default, is asked for too (decision 134).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slot_budget: Option<u64>,
 }
 
 impl Default for VisibilityParams {
@@ -424,6 +435,7 @@ impl Default for VisibilityParams {
             zero_dov_floor: FloorTest::DEFAULT.to_vec(),
             lod_draw_tolerance: DEFAULT_LOD_TOLERANCE_TEXELS,
             region_views: 0,
+            slot_budget: Some(DEFAULT_SLOT_BUDGET),
         }
     }
 }

@@ -127,6 +127,11 @@ fn run_starts(
     Some((first, page))
 }
 
+/// Pages the node runs of a layout of `cells` cells take (`None` past 2^64).
+pub(crate) fn run_pages(fanout: &[u16], codec: VPageCodec, cells: u32, cap: u64) -> Option<u64> {
+    run_starts(fanout, codec, cells, 0, cap, u64::MAX).map(|(_, pages)| pages)
+}
+
 fn slots(size: u64, cap: u64) -> SlotArray {
     SlotArray { first: 0, size, cap }
 }

@@ -112,6 +112,11 @@ impl Writer {
     }
 }
 
+/// Pages the segments of `cells` cells of `nodes` nodes take (`None` past 2^64).
+pub(crate) fn segment_pages(nodes: usize, cells: u32, cap: u64) -> Option<u64> {
+    SlotArray { first: 0, size: (ADDR_BYTES * nodes) as u64, cap }.pages(u64::from(cells))
+}
+
 /// Where the cells' segments lie (immutable, shared by all cursors).
 pub(crate) struct Segments {
     slots: SlotArray,

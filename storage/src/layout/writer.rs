@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use super::context::WriteCtx;
 use super::{LayoutKind, LayoutOptions, LayoutSize, MAX_LAYOUT_PAGE_SIZE, horizontal, indexed, vertical};
 use crate::error::{Error, Result};
-use crate::pagefile::MIN_PAGE_SIZE;
+use crate::pagefile::{MIN_PAGE_SIZE, PAGE_CRC_LEN};
 use crate::vpage::{SparseCodec, VData, VEntry, VPageCodec, validate_cell};
 
 /// What a layout must know before its first cell: the grid's cell count, the tree's fan-outs,
@@ -27,6 +27,25 @@ impl VShape {
     /// The shape of a whole V-data.
     pub fn of(data: &VData) -> VShape {
         VShape { cell_count: data.cell_count, node_fanout: data.node_fanout.clone(), nvo_max: data.stats().nvo_max }
+    }
+
+    /// Bytes the `kind` layout spends on a slot for every (node, cell), seen or not: the
+    /// horizontal layout's V-page runs, the vertical layout's segments; none for indexed-vertical,
+    /// which stores only what each cell sees. They grow as cells × nodes and are known before a
+    /// V-page is written, so a build can leave out a layout that would be mostly empty slots
+    /// (saturates at `u64::MAX`).
+    pub fn slot_bytes(&self, kind: LayoutKind, opts: &LayoutOptions) -> u64 {
+        let page = opts.page_size.clamp(MIN_PAGE_SIZE, MAX_LAYOUT_PAGE_SIZE);
+        let cap = u64::from(page) - PAGE_CRC_LEN as u64;
+        let pages = match kind {
+            LayoutKind::Horizontal => {
+                let codec = VPageCodec::new(opts.dov, self.nvo_max);
+                horizontal::run_pages(&self.node_fanout, codec, self.cell_count, cap)
+            }
+            LayoutKind::Vertical => vertical::segment_pages(self.node_fanout.len(), self.cell_count, cap),
+            LayoutKind::IndexedVertical => Some(0),
+        };
+        pages.map_or(u64::MAX, |p| p.saturating_mul(u64::from(page)))
     }
 }
 
@@ -117,6 +136,39 @@ impl LayoutWriter {
             Inner::Horizontal(w) => w.finish(),
             Inner::Vertical(w) => w.finish(),
             Inner::Indexed(w) => w.finish(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::{Meta, record_pages, write_layout};
+    use crate::pagefile::{PageFile, ReadMode};
+    use crate::synthetic::{SyntheticSpec, synthetic_vdata};
+    use crate::vpage::DovCodec;
+
+    /// `slot_bytes` is what the writers lay down: horizontal's V-page pages, vertical's
+    /// segment pages, for slots smaller and larger than a page.
+    #[test]
+    fn slot_bytes_are_the_slots_written() {
+        for (cells, fanout, levels, page_size, dov) in
+            [(30, 16, 3, 4096, DovCodec::F32), (7, 4, 2, 256, DovCodec::LogU16), (5, 16, 2, 64, DovCodec::F32)]
+        {
+            let data = synthetic_vdata(&SyntheticSpec { cells, fanout, levels, ..Default::default() });
+            let shape = VShape::of(&data);
+            let opts = LayoutOptions { page_size, dov, ..Default::default() };
+            let dir = tempfile::tempdir().unwrap();
+            let h = write_layout(dir.path(), LayoutKind::Horizontal, &data, &opts).unwrap();
+            assert_eq!(shape.slot_bytes(LayoutKind::Horizontal, &opts), h.vpage_bytes, "{page_size}");
+            write_layout(dir.path(), LayoutKind::Vertical, &data, &opts).unwrap();
+            let path = dir.path().join(vertical::INDEX_FILE);
+            let index = PageFile::open(&path, vertical::INDEX_TAG, ReadMode::Mmap).unwrap();
+            let cap = u64::from(page_size) - PAGE_CRC_LEN as u64;
+            let meta = Meta::encoded_len(LayoutKind::Vertical, u64::from(cells), shape.node_fanout.len() as u64);
+            let segments = index.page_count() - record_pages(meta, cap);
+            assert_eq!(shape.slot_bytes(LayoutKind::Vertical, &opts), segments * u64::from(page_size));
+            assert_eq!(shape.slot_bytes(LayoutKind::IndexedVertical, &opts), 0);
         }
     }
 }

@@ -76,7 +76,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 eprintln!("building {}", dir.display());
                 let params = BuildParams {
                     fanout: Some(m),
-                    visibility: Some(VisibilityParams { resolution, backend: BackendKind::Cpu, ..Default::default() }),
+                    // Every layout, whatever its size: the table compares their bytes.
+                    visibility: Some(VisibilityParams {
+                        resolution,
+                        backend: BackendKind::Cpu,
+                        slot_budget: None,
+                        ..Default::default()
+                    }),
                     ..Default::default()
                 };
                 hdov::build(&scene, &dir, &params, Overwrite::Ours, &Progress::for_terminal(false))?;

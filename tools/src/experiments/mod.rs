@@ -166,6 +166,8 @@ impl Ctx {
                 resolution: self.cfg.resolution,
                 backend: BackendKind::Cpu,
                 dov_codec: codec,
+                // The experiments compare the layouts: every one is written, whatever its size.
+                slot_budget: None,
                 ..Default::default()
             }),
             ..Default::default()
