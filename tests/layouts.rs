@@ -112,8 +112,8 @@ fn a_slot_budget_leaves_out_the_layouts_that_would_pass_it() {
         dir
     };
     let open = |dir: std::path::PathBuf| Database::open(&dir).unwrap();
-    let left_out = |db: &Database| -> Vec<(String, u64)> {
-        db.manifest().visibility.as_ref().unwrap().left_out.iter().map(|l| (l.name.clone(), l.slot_bytes)).collect()
+    let left_out = |db: &Database| -> Vec<(LayoutKind, u64)> {
+        db.manifest().visibility.as_ref().unwrap().left_out.iter().map(|l| (l.kind, l.slot_bytes)).collect()
     };
     let all = open(build("all", Some(v(None, &LayoutKind::ALL, None))));
     assert_eq!(all.layouts(), LayoutKind::ALL.to_vec());
@@ -122,7 +122,7 @@ fn a_slot_budget_leaves_out_the_layouts_that_would_pass_it() {
     let none = open(build("none", Some(v(Some(1), &LayoutKind::ALL, None))));
     assert_eq!(none.layouts(), vec![LayoutKind::IndexedVertical]);
     let out = left_out(&none);
-    assert_eq!(out.iter().map(|l| l.0.as_str()).collect::<Vec<_>>(), ["horizontal", "vertical"]);
+    assert_eq!(out.iter().map(|l| l.0).collect::<Vec<_>>(), [LayoutKind::Horizontal, LayoutKind::Vertical]);
     // What the left-out layouts would have taken is what the whole build wrote of them: the
     // horizontal layout's V-pages are all slots; vertical's segments are part of its index.
     let written = all.info().unwrap().layouts;
@@ -148,21 +148,49 @@ fn a_slot_budget_leaves_out_the_layouts_that_would_pass_it() {
     let alone = open(build("alone", Some(v(Some(1), &[LayoutKind::Horizontal], None))));
     assert_eq!(alone.layouts(), vec![LayoutKind::Horizontal]);
 
+    // Shards merge into what the whole build wrote: under the budget, and without one (shards
+    // of a build before decision 134 record none) every layout.
     let base = build("base", None);
-    let shards: Vec<_> = (0..2)
-        .map(|i| build(&format!("shard{i}"), Some(v(Some(1), &LayoutKind::ALL, Some(hdov::Shard::new(i, 2).unwrap())))))
-        .collect();
-    let merged = tmp.path().join("merged");
-    hdov::merge(&base, &shards, &merged, Overwrite::Never).unwrap();
-    let merged = open(merged);
-    assert_eq!(merged.layouts(), vec![LayoutKind::IndexedVertical]);
-    assert_eq!(left_out(&merged), out);
+    for (budget, want) in [(Some(1), &out[..]), (None, &[][..])] {
+        let shards: Vec<_> = (0..2)
+            .map(|i| {
+                let shard = Some(hdov::Shard::new(i, 2).unwrap());
+                build(&format!("shard{i}-{budget:?}"), Some(v(budget, &LayoutKind::ALL, shard)))
+            })
+            .collect();
+        let merged = tmp.path().join(format!("merged-{budget:?}"));
+        hdov::merge(&base, &shards, &merged, Overwrite::Never).unwrap();
+        let merged = open(merged);
+        assert_eq!(left_out(&merged), want);
+        assert_eq!(merged.layouts().len() + want.len(), 3);
+    }
 
-    // A manifest whose written and left-out layouts do not add up to those asked for is refused.
-    let path = tmp.path().join("none/manifest.json");
-    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
-    json["visibility"]["left_out"][1]["name"] = "indexed-vertical".into();
-    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
-    let err = Database::open(&tmp.path().join("none")).err().unwrap().to_string();
-    assert!(err.contains("left out"), "{err}");
+    // A manifest whose written and left-out layouts are not those asked for, under a budget they
+    // pass, is refused: a written layout also listed as left out, one left out that was not asked
+    // for, one left out without a budget, indexed-vertical left out.
+    let tamper = |db: &str, change: &dyn Fn(&mut serde_json::Value)| {
+        let path = tmp.path().join(db).join("manifest.json");
+        let good = std::fs::read(&path).unwrap();
+        let mut json: serde_json::Value = serde_json::from_slice(&good).unwrap();
+        change(&mut json);
+        std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+        let err = Database::open(&tmp.path().join(db)).err().map(|e| e.to_string());
+        std::fs::write(&path, good).unwrap();
+        assert!(err.as_deref().is_some_and(|e| e.contains("left out")), "{err:?}");
+    };
+    let left_out_json = |kind: &str| serde_json::json!([{ "name": kind, "slot_bytes": 1u64 << 40 }]);
+    tamper("between", &|j| j["visibility"]["left_out"][0]["name"] = "vertical".into());
+    tamper("alone", &|j| j["visibility"]["left_out"] = left_out_json("vertical"));
+    tamper("none", &|j| {
+        j["build"]["visibility"].as_object_mut().unwrap().remove("slot_budget");
+    });
+    tamper("none", &|j| j["build"]["visibility"]["slot_budget"] = (1u64 << 50).into());
+    tamper("none", &|j| {
+        j["visibility"]["left_out"]
+            .as_array_mut()
+            .unwrap()
+            .extend(left_out_json("indexed-vertical").as_array().unwrap().clone());
+        j["visibility"]["layouts"] = serde_json::json!([]);
+    });
+    assert_eq!(open(tmp.path().join("none")).layouts(), vec![LayoutKind::IndexedVertical]);
 }

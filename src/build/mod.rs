@@ -438,7 +438,7 @@ pub(crate) fn layouts_for(
     for kind in asked {
         match budget.map(|b| (b, shape.slot_bytes(kind, opts))) {
             Some((b, slot_bytes)) if slot_bytes > b => {
-                left_out.push(LeftOutLayout { name: kind.name().to_string(), slot_bytes })
+                left_out.push(LeftOutLayout { kind, slot_bytes })
             }
             _ => written.push(kind),
         }

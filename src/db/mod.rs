@@ -170,14 +170,8 @@ impl Database {
             .iter()
             .find(|l| l.kind() == kind)
             .ok_or_else(|| {
-                let left_out = self.manifest.visibility.iter().flat_map(|v| &v.left_out).find(|l| l.name == kind.name());
-                let why = left_out.map_or(String::new(), |l| {
-                    format!(
-                        ": its build left it out, as its slots for every node in every cell would take {} bytes \
-                         (build with --layouts naming it to write it)",
-                        l.slot_bytes
-                    )
-                });
+                let why = self.manifest.visibility.as_ref().and_then(|v| v.left_out_of(kind));
+                let why = why.map_or(String::new(), |l| format!(": {l}"));
                 Error::bad_param(Param::Layout, format!("{} holds no {kind} layout{why}", self.dir.display()))
             })
     }

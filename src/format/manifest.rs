@@ -10,6 +10,7 @@ use super::{FORMAT_VERSION, MANIFEST_FILE, SCENE_FILES};
 use crate::error::{Error, Result};
 use crate::grid::ViewGrid;
 use crate::rtree::TreeStats;
+use hdov_storage::LayoutKind;
 
 /// What the visibility stage measured and wrote.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -37,8 +38,28 @@ pub struct VisibilityInfo {
 /// `slot_bytes`, more than the build's slot budget.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LeftOutLayout {
-    pub name: String,
+    #[serde(rename = "name", with = "super::by_name::one")]
+    pub kind: LayoutKind,
     pub slot_bytes: u64,
+}
+
+/// Why it is missing, and how to have it: what `hdov build`, `hdov info` and a refused query say.
+impl std::fmt::Display for LeftOutLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "left out by the build: its slots for every node in every cell would take {} bytes (name it in \
+             hdov build --layouts to write it)",
+            self.slot_bytes
+        )
+    }
+}
+
+impl VisibilityInfo {
+    /// The entry of `kind` if the slot budget left it out.
+    pub fn left_out_of(&self, kind: LayoutKind) -> Option<&LeftOutLayout> {
+        self.left_out.iter().find(|l| l.kind == kind)
+    }
 }
 
 /// Wall seconds of the visibility stage's phases, each summed over the cells (a phase runs
@@ -212,10 +233,9 @@ impl Manifest {
 
     /// The layouts the build wrote, in order: those it stores, less those the slot budget left
     /// out (decision 134). [`Manifest::check`] holds the written list to these.
-    pub fn written_layouts(&self) -> Vec<hdov_storage::LayoutKind> {
+    pub fn written_layouts(&self) -> Vec<LayoutKind> {
         let (Some(params), Some(v)) = (&self.build.visibility, &self.visibility) else { return Vec::new() };
-        let left_out = |k: &hdov_storage::LayoutKind| v.left_out.iter().any(|l| l.name == k.name());
-        params.stored_layouts().into_iter().filter(|k| !left_out(k)).collect()
+        params.stored_layouts().into_iter().filter(|&k| v.left_out_of(k).is_none()).collect()
     }
 
     /// Reads and validates `DIR/manifest.json` (see [`Manifest::check`]).
@@ -305,9 +325,21 @@ impl Manifest {
             let names: Vec<&str> = v.layouts.iter().map(|l| l.name.as_str()).collect();
             let built: Vec<String> = self.written_layouts().iter().map(|k| k.to_string()).collect();
             let asked = params.stored_layouts();
-            if names != built || v.left_out.iter().any(|l| !asked.iter().any(|k| k.name() == l.name)) {
-                let left_out: Vec<&str> = v.left_out.iter().map(|l| l.name.as_str()).collect();
-                return Err(format!("layouts {names:?} and left out {left_out:?} differ from those asked for, {asked:?}"));
+            let left_out: Vec<String> = v.left_out.iter().map(|l| l.kind.to_string()).collect();
+            // Each layout asked for is written or left out, once; only horizontal and vertical are
+            // ever left out, only under a budget they pass, beside indexed-vertical.
+            let once = asked.iter().all(|&k| v.left_out.iter().filter(|l| l.kind == k).count() <= 1);
+            let leavable = v.left_out.iter().all(|l| {
+                asked.contains(&l.kind)
+                    && l.kind != LayoutKind::IndexedVertical
+                    && asked.contains(&LayoutKind::IndexedVertical)
+                    && params.slot_budget.is_some_and(|b| l.slot_bytes > b)
+            });
+            if names != built || v.left_out.len() + names.len() != asked.len() || !once || !leavable {
+                return Err(format!(
+                    "layouts {names:?} and those left out, {left_out:?}, are not those asked for, {asked:?}, under a slot budget of {:?}",
+                    params.slot_budget
+                ));
             }
             expected.extend(v.layouts.iter().flat_map(|l| &l.files));
         }

@@ -112,9 +112,9 @@ impl Writer {
     }
 }
 
-/// Pages the segments of `cells` cells of `nodes` nodes take (`None` past 2^64).
-pub(crate) fn segment_pages(nodes: usize, cells: u32, cap: u64) -> Option<u64> {
-    SlotArray { first: 0, size: (ADDR_BYTES * nodes) as u64, cap }.pages(u64::from(cells))
+/// The cells' segments, one address per node each, as equal-size slots from page `first`.
+pub(crate) fn segment_slots(first: u64, nodes: u64, cap: u64) -> SlotArray {
+    SlotArray { first, size: ADDR_BYTES as u64 * nodes, cap }
 }
 
 /// Where the cells' segments lie (immutable, shared by all cursors).
@@ -124,11 +124,7 @@ pub(crate) struct Segments {
 
 impl Segments {
     pub fn new(meta: &Meta, index: &PagedFile) -> Result<Self> {
-        let slots = SlotArray {
-            first: meta.data_start,
-            size: (ADDR_BYTES as u64) * u64::from(meta.node_count),
-            cap: index.file.capacity() as u64,
-        };
+        let slots = segment_slots(meta.data_start, u64::from(meta.node_count), index.file.capacity() as u64);
         let end = slots.pages(u64::from(meta.cell_count)).and_then(|n| n.checked_add(meta.data_start));
         if end != Some(index.file.page_count()) {
             return Err(index.corrupt(format!(

@@ -33,7 +33,8 @@ impl VShape {
     /// horizontal layout's V-page runs, the vertical layout's segments; none for indexed-vertical,
     /// which stores only what each cell sees. They grow as cells × nodes and are known before a
     /// V-page is written, so a build can leave out a layout that would be mostly empty slots
-    /// (saturates at `u64::MAX`).
+    /// (saturates at `u64::MAX`). A page size the writers refuse is taken as the nearest they
+    /// accept: [`LayoutWriter::create`] refuses it.
     pub fn slot_bytes(&self, kind: LayoutKind, opts: &LayoutOptions) -> u64 {
         let page = opts.page_size.clamp(MIN_PAGE_SIZE, MAX_LAYOUT_PAGE_SIZE);
         let cap = u64::from(page) - PAGE_CRC_LEN as u64;
@@ -42,7 +43,9 @@ impl VShape {
                 let codec = VPageCodec::new(opts.dov, self.nvo_max);
                 horizontal::run_pages(&self.node_fanout, codec, self.cell_count, cap)
             }
-            LayoutKind::Vertical => vertical::segment_pages(self.node_fanout.len(), self.cell_count, cap),
+            LayoutKind::Vertical => {
+                vertical::segment_slots(0, self.node_fanout.len() as u64, cap).pages(u64::from(self.cell_count))
+            }
             LayoutKind::IndexedVertical => Some(0),
         };
         pages.map_or(u64::MAX, |p| p.saturating_mul(u64::from(page)))
@@ -161,10 +164,19 @@ mod tests {
             let dir = tempfile::tempdir().unwrap();
             let h = write_layout(dir.path(), LayoutKind::Horizontal, &data, &opts).unwrap();
             assert_eq!(shape.slot_bytes(LayoutKind::Horizontal, &opts), h.vpage_bytes, "{page_size}");
+            // The same by the thesis's arithmetic: per node, C slots of its V-page size packed
+            // whole into pages, or each spread over whole pages.
+            let cap = u64::from(page_size) - PAGE_CRC_LEN as u64;
+            let codec = VPageCodec::new(dov, shape.nvo_max);
+            let c = u64::from(cells);
+            let runs: u64 = (shape.node_fanout.iter())
+                .map(|&f| codec.vpage_bytes(f) as u64)
+                .map(|s| if s <= cap { c.div_ceil(cap / s) } else { c * s.div_ceil(cap) })
+                .sum();
+            assert_eq!(h.vpage_bytes, runs * u64::from(page_size), "{page_size}");
             write_layout(dir.path(), LayoutKind::Vertical, &data, &opts).unwrap();
             let path = dir.path().join(vertical::INDEX_FILE);
             let index = PageFile::open(&path, vertical::INDEX_TAG, ReadMode::Mmap).unwrap();
-            let cap = u64::from(page_size) - PAGE_CRC_LEN as u64;
             let meta = Meta::encoded_len(LayoutKind::Vertical, u64::from(cells), shape.node_fanout.len() as u64);
             let segments = index.page_count() - record_pages(meta, cap);
             assert_eq!(shape.slot_bytes(LayoutKind::Vertical, &opts), segments * u64::from(page_size));
