@@ -14,8 +14,8 @@
 //!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
 //! ```
 //!
-//! Per level: build seconds (the LOD and visibility stages', and where the visibility stage's went)
-//! and view cells; per viewpoint whether it is refused; the faces of the default answer (threshold
+//! Per level: build seconds (the LOD and visibility stages', and where the visibility stage's went),
+//! view cells and the database's bytes by layout; per viewpoint whether it is refused; the faces of the default answer (threshold
 //! mode, default η) and of the naive one (every visible object at full detail) against the level's
 //! own PVS (the faces of every leaf in a cluster the compiler's bit vectors mark visible from the
 //! viewpoint's cluster) and against the triangles seen from the viewpoint (a full id cube map of
@@ -114,6 +114,11 @@ struct LevelRow {
     visibility_s: f64,
     /// Where the visibility stage's time went.
     phases: Option<hdov::BakePhases>,
+    /// The database on disk: its files' bytes (all but the manifest), those of each layout written, and the layouts
+    /// the slot budget left out (decision 134).
+    db_bytes: u64,
+    layout_bytes: Vec<(hdov::LayoutKind, u64)>,
+    left_out: Vec<hdov::LayoutKind>,
     viewpoints: usize,
     refused: usize,
     /// Per answered viewpoint: default answer faces, naive faces, PVS faces, seen triangles,
@@ -232,6 +237,9 @@ fn measure(
     let build_s = start.elapsed().as_secs_f64();
     let db = Database::open(&dir)?;
     let grid = db.grid().cloned().ok_or("built without a grid")?;
+    let info = db.info()?;
+    let layout_bytes: Vec<_> = info.layouts.iter().map(|(&k, l)| (k, l.bytes)).collect();
+    let db_bytes = info.files.iter().map(|f| f.bytes).sum::<u64>() + layout_bytes.iter().map(|l| l.1).sum::<u64>();
 
     // The truth: every triangle of the database's objects its own object.
     let measured = hdov::objects_of(scene, &params).into_owned();
@@ -250,7 +258,10 @@ fn measure(
         build_s,
         lod_s: report.lod_seconds,
         visibility_s: report.manifest.visibility.as_ref().map_or(0.0, |v| v.seconds),
-        phases: report.manifest.visibility.and_then(|v| v.phases),
+        phases: report.manifest.visibility.as_ref().and_then(|v| v.phases.clone()),
+        db_bytes,
+        layout_bytes,
+        left_out: report.manifest.visibility.iter().flat_map(|v| &v.left_out).map(|l| l.kind).collect(),
         viewpoints: views.len(),
         refused: 0,
         answered: Vec::new(),
@@ -351,6 +362,10 @@ fn print_level(r: &LevelRow) {
     if let Some(phases) = &r.phases {
         println!("  visibility phases: {phases}");
     }
+    let mb = |b: u64| b as f64 / 1e6;
+    let layouts: Vec<String> = r.layout_bytes.iter().map(|(k, b)| format!("{k} {:.1} MB", mb(*b))).collect();
+    let left_out: Vec<String> = r.left_out.iter().map(|k| format!(", {k} left out")).collect();
+    println!("  database {:.1} MB: {}{}", mb(r.db_bytes), layouts.join(", "), left_out.concat());
     let [missed, thin, back] = r.missed_texels;
     println!(
         "  {thin} of the {missed} texels its answers missed lie in features one texel wide, {back} show a back face"
