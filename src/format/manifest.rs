@@ -326,16 +326,16 @@ impl Manifest {
             let built: Vec<String> = self.written_layouts().iter().map(|k| k.to_string()).collect();
             let asked = params.stored_layouts();
             let left_out: Vec<String> = v.left_out.iter().map(|l| l.kind.to_string()).collect();
-            // Each layout asked for is written or left out, once; only horizontal and vertical are
-            // ever left out, only under a budget they pass, beside indexed-vertical.
-            let once = asked.iter().all(|&k| v.left_out.iter().filter(|l| l.kind == k).count() <= 1);
+            // Each layout asked for is written or left out, once (`built` is `asked` less what is
+            // left out, so the counts add up only if every entry left out was asked for, once);
+            // only horizontal and vertical are ever left out, only under a budget they pass,
+            // beside indexed-vertical.
             let leavable = v.left_out.iter().all(|l| {
-                asked.contains(&l.kind)
-                    && l.kind != LayoutKind::IndexedVertical
+                l.kind != LayoutKind::IndexedVertical
                     && asked.contains(&LayoutKind::IndexedVertical)
                     && params.slot_budget.is_some_and(|b| l.slot_bytes > b)
             });
-            if names != built || v.left_out.len() + names.len() != asked.len() || !once || !leavable {
+            if names != built || v.left_out.len() + names.len() != asked.len() || !leavable {
                 return Err(format!(
                     "layouts {names:?} and those left out, {left_out:?}, are not those asked for, {asked:?}, under a slot budget of {:?}",
                     params.slot_budget
