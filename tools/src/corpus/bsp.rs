@@ -121,7 +121,8 @@ impl Level {
     pub fn parse(bytes: &[u8]) -> Result<Level, String> {
         let r = Reader::new(bytes)?;
         let shaders: Vec<String> =
-            r.records(1, 72)?.map(|t| String::from_utf8_lossy(&t[..64]).trim_end_matches('\0').to_string()).collect();
+            // A C string in 64 bytes: what follows its first NUL is whatever the compiler left.
+            r.records(1, 72)?.map(|t| String::from_utf8_lossy(t[..64].split(|&b| b == 0).next().unwrap_or(&[])).into_owned()).collect();
         let planes: Vec<(Vec3, f32)> = r.records(2, 16)?.map(|p| (vec_at(p, 0), f32_at(p, 3))).collect();
         let nodes: Vec<(i32, [i32; 2])> =
             r.records(3, 36)?.map(|n| (i32_at(n, 0), [i32_at(n, 1), i32_at(n, 2)])).collect();
@@ -449,6 +450,23 @@ mod tests {
         assert!(of_big.iter().all(|t| t.contains(&v(1.0, 0.0)) && area(t).z > 0.0));
         assert!((of_big.iter().map(|t| area(t).z).sum::<f32>() - area(&big).z).abs() < 1e-6);
         assert_eq!(level.triangles.len(), 4);
+    }
+
+    /// A shader's name is a C string in its 64 bytes: compilers leave junk after the NUL.
+    #[test]
+    fn shader_names_end_at_their_nul() {
+        let mut bsp = b"IBSP".to_vec();
+        bsp.extend(46i32.to_le_bytes());
+        let start: i32 = 8 + 17 * 8;
+        for lump in 0..17 {
+            let len: i32 = if lump == 1 { 72 } else { 0 };
+            bsp.extend(start.to_le_bytes());
+            bsp.extend(len.to_le_bytes());
+        }
+        let mut shader = b"textures/base/floor\0\0junk\x01p\0q".to_vec();
+        shader.resize(72, 0);
+        bsp.extend(shader);
+        assert_eq!(Level::parse(&bsp).unwrap().shaders, vec!["textures/base/floor".to_string()]);
     }
 
     #[test]
