@@ -193,12 +193,7 @@ pub fn place_parts(mask: u64) -> Vec<u64> {
     while left != 0 {
         let mut part = left & left.wrapping_neg();
         loop {
-            // Grow by one step along x (not across a row's end) and z.
-            let grown = part
-                | ((part << 1) & !0x0101_0101_0101_0101)
-                | ((part >> 1) & !0x8080_8080_8080_8080)
-                | (part << 8)
-                | (part >> 8);
+            let grown = step_x(part) | (part << 8) | (part >> 8);
             let grown = grown & mask;
             if grown == part {
                 break;
@@ -209,6 +204,23 @@ pub fn place_parts(mask: u64) -> Vec<u64> {
         parts.push(part);
     }
     parts
+}
+
+/// Squares one step along x from `mask`'s, and its own (not across a row's end).
+fn step_x(mask: u64) -> u64 {
+    mask | ((mask << 1) & !0x0101_0101_0101_0101) | ((mask >> 1) & !0x8080_8080_8080_8080)
+}
+
+/// The squares of `within` (a lattice cell's places, [`ViewGrid::lattice_places`]) that are
+/// `places` (one of its view cells) or touch one of them, edge or corner, on their side of any
+/// wall (in the part of `within` that 4-neighbouring squares join, [`place_parts`]). A viewer
+/// on a view cell's border, where a query takes the view cell whose square holds the point,
+/// sees what is seen from just across it.
+pub fn places_around(places: u64, within: u64) -> u64 {
+    let row = step_x(places);
+    let grown = row | (row << 8) | (row >> 8);
+    let side = place_parts(within).into_iter().filter(|p| p & places != 0).fold(0, |m, p| m | p);
+    (grown & side) | places
 }
 
 /// The four quarters of a footprint's squares (4 × 4 squares each), as masks of places.
@@ -349,6 +361,52 @@ impl ViewGrid {
     pub fn view_cells_of(&self, id: usize) -> impl Iterator<Item = usize> + '_ {
         let lattice = self.lattice_count();
         (id < lattice && self.is_present(id)).then_some(id).into_iter().chain(self.parts_of_cell(id).map(move |k| lattice + k))
+    }
+
+    /// The squares where viewers stand in the lattice cells beside lattice cell `c` on its layer
+    /// (along x and z, edge or corner) that touch one of `places`, its own squares, across its
+    /// border: per such neighbour, its id and each of those squares' bits with the bit of one
+    /// of `places` it touches. Without [`ViewGrid::places`], none.
+    pub fn squares_across(&self, c: [u32; 3], places: u64) -> Vec<(usize, Vec<(u32, u32)>)> {
+        let edge = PLACES_PER_EDGE as i64;
+        let mut out = Vec::new();
+        for (dx, dz) in [(-1i64, -1i64), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+            let (nx, nz) = (i64::from(c[0]) + dx, i64::from(c[2]) + dz);
+            if nx < 0 || nz < 0 || nx >= i64::from(self.dims[0]) || nz >= i64::from(self.dims[2]) {
+                continue;
+            }
+            let n = self.cell_id([nx as u32, c[1], nz as u32]);
+            let theirs = self.lattice_places(n);
+            let mut pairs = Vec::new();
+            let mut left = if theirs == 0 { 0 } else { places };
+            while left != 0 {
+                let bit = left.trailing_zeros();
+                left &= left - 1;
+                let (x, z) = (i64::from(bit) % edge, i64::from(bit) / edge);
+                for (ox, oz) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                    // The square beside, in the neighbour's own footprint.
+                    let (tx, tz) = (x + ox - dx * edge, z + oz - dz * edge);
+                    if (0..edge).contains(&tx) && (0..edge).contains(&tz) {
+                        let their = (tz * edge + tx) as u32;
+                        if theirs >> their & 1 == 1 && !pairs.iter().any(|p: &(u32, u32)| p.0 == their) {
+                            pairs.push((their, bit));
+                        }
+                    }
+                }
+            }
+            if !pairs.is_empty() {
+                out.push((n, pairs));
+            }
+        }
+        out
+    }
+
+    /// The centre of square `bit` of lattice cell `c`'s footprint, half way up the cell.
+    pub fn square_centre(&self, c: [u32; 3], bit: u32) -> Vec3 {
+        let b = self.cell_box(c);
+        let edge = PLACES_PER_EDGE as f32;
+        let at = Vec3::new(((bit % PLACES_PER_EDGE) as f32 + 0.5) / edge, 0.5, ((bit / PLACES_PER_EDGE) as f32 + 0.5) / edge);
+        b.min + at * b.extent()
     }
 
     /// The squares of lattice cell `id` where viewers stand, in any of its view cells.
@@ -653,6 +711,56 @@ mod tests {
         // Bit 7 of a row and bit 0 of the next are not neighbours.
         assert_eq!(place_parts(1 << 7 | 1 << 8).len(), 2);
         assert_eq!(place_parts(1 << 7 | 1 << 15).len(), 1);
+    }
+
+    #[test]
+    fn the_squares_around_a_view_cell_stop_at_walls_and_at_the_cell() {
+        let mask = |squares: &[(u32, u32)]| squares.iter().fold(0u64, |m, &(x, z)| m | 1 << (z * 8 + x));
+        let all = |xs: std::ops::Range<u32>| (0..8).flat_map(move |z| xs.clone().map(move |x| (x, z))).collect::<Vec<_>>();
+        // The north-east quarter of a whole cell takes the ring around it, corner included.
+        let ring: Vec<(u32, u32)> = (3..8).flat_map(|z| (3..8).map(move |x| (x, z))).collect();
+        assert_eq!(places_around(QUARTERS[3], u64::MAX), mask(&ring));
+        // One square in the middle: its 3 × 3 block; in a corner, what of it the cell has.
+        assert_eq!(places_around(mask(&[(4, 4)]), u64::MAX).count_ones(), 9);
+        assert_eq!(places_around(mask(&[(0, 0)]), u64::MAX), mask(&[(0, 0), (1, 0), (0, 1), (1, 1)]));
+        // Nothing wraps from one row's end to the next row's start.
+        assert_eq!(places_around(mask(&[(7, 3)]), u64::MAX) & mask(&[(0, 4), (0, 3), (0, 2)]), 0);
+        // A wall at column 3: the west side's squares never take the east side's.
+        let (west, east) = (mask(&all(0..3)), mask(&all(4..8)));
+        assert_eq!(places_around(west & QUARTERS[0], west | east), west & mask(&all(0..3)) & (QUARTERS[0] | QUARTERS[0] << 8));
+        assert_eq!(places_around(east & QUARTERS[1], west | east) & west, 0);
+        // Only squares where viewers stand.
+        assert_eq!(places_around(QUARTERS[0], QUARTERS[0] | QUARTERS[1]) & (QUARTERS[2] | QUARTERS[3]), 0);
+    }
+
+    #[test]
+    fn the_squares_across_a_view_cells_border_touch_it() {
+        // 3 × 1 × 3 cells of 2 m, viewers everywhere but in the cell at x 0, z 2.
+        let mut g = ViewGrid::new(Aabb::new(Vec3::ZERO, Vec3::new(6.0, 1.0, 6.0)), [3, 1, 3]);
+        let ids: Vec<usize> = (0..9).filter(|&id| id != 6).collect();
+        g.present = Some(CellSet::from_ids(ids.iter().map(|&id| id as u32).collect()));
+        g.places = Some(vec![ALL_PLACES; ids.len()]);
+        assert!(g.check().is_ok());
+        let bits = |pairs: &[(u32, u32)]| pairs.iter().map(|p| p.0).collect::<std::collections::BTreeSet<u32>>();
+        // The centre cell's north-east quarter touches the cells at +x, +z and both.
+        let across = g.squares_across([1, 0, 1], QUARTERS[3]);
+        let by_id: std::collections::BTreeMap<usize, Vec<(u32, u32)>> = across.into_iter().collect();
+        assert_eq!(by_id.keys().copied().collect::<Vec<_>>(), vec![g.cell_id([2, 0, 1]), g.cell_id([1, 0, 2]), g.cell_id([2, 0, 2])]);
+        assert_eq!(bits(&by_id[&g.cell_id([2, 0, 1])]), (3..8).map(|z| z * 8).collect());
+        assert_eq!(bits(&by_id[&g.cell_id([1, 0, 2])]), (3..8).collect());
+        assert_eq!(bits(&by_id[&g.cell_id([2, 0, 2])]), [0].into());
+        // Each square across is paired with one of the quarter's that touches it.
+        for (n, pairs) in &by_id {
+            for &(their, own) in pairs {
+                let (a, b) = (g.square_centre([1, 0, 1], own), g.square_centre(g.cell_coords(*n), their));
+                assert!(QUARTERS[3] >> own & 1 == 1 && (a - b).abs().max_element() <= 0.25 + 1e-6, "{a} {b}");
+                assert_eq!(a.y, 0.5);
+            }
+        }
+        // The south-west quarter of the cell at x 1, z 2: nothing from the cell where no viewer
+        // stands, nor past the grid's edge.
+        let across = g.squares_across([1, 0, 2], QUARTERS[0]);
+        assert_eq!(across.iter().map(|a| a.0).collect::<Vec<_>>(), vec![g.cell_id([0, 0, 1]), g.cell_id([1, 0, 1])]);
     }
 
     /// A wall along x = ½ through cell 5 of a 4 × 1 × 4 grid: its west squares keep id 5, its

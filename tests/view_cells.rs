@@ -200,14 +200,15 @@ fn a_wall_through_a_cell_parts_its_answers() {
 
 /// A view cell is a quarter of its lattice cell, and answers what is seen from it, not from the
 /// rest of the lattice cell: a box 30 m away, seen past the end of a tall wall 0.5 m beyond
-/// the cell from the half of the cell beyond x = 1 only, is in the answers of that half's two
-/// quarters and not of the other two (no floors, so that nothing but the samples counts).
+/// the cell from the part of the cell beyond x = 1.5 only, is in the answers of the two
+/// quarters beyond x = 1 and not of the other two, nor from the squares around them, which
+/// reach x = 1.25 (no floors, so that nothing but the samples counts).
 #[test]
 fn a_quarter_of_a_cell_answers_what_is_seen_from_it() {
     let mut b = hdov_testkit::scenes::SceneBuilder::default();
     let v = Vec3::new;
     b.aabox(v(0.0, -0.3, 0.0), v(2.0, 0.0, 2.0));
-    b.aabox(v(-20.0, 0.0, 2.45), v(1.0, 10.0, 2.55));
+    b.aabox(v(-20.0, 0.0, 2.45), v(1.5, 10.0, 2.55));
     let far = b.aabox(v(-0.5, 0.0, 30.0), v(0.5, 3.0, 31.0));
     let mut scene = b.build();
     let g = grid(&scene);
@@ -224,6 +225,35 @@ fn a_quarter_of_a_cell_answers_what_is_seen_from_it() {
     assert!(cells.windows(2).all(|w| w[0] != w[1]), "{cells:?}");
     assert!(!sees(quarters[0]) && !sees(quarters[1]), "the wall hides the box from x < 1");
     assert!(sees(quarters[2]) && sees(quarters[3]), "the box is seen past the wall's end from x > 1");
+}
+
+/// A viewer on the border between two quarters, whom the query places in one of them, gets
+/// what is seen from the border: a strip 30 m away, its right edge at x = 1, is seen past a tall
+/// wall from x ≤ 1 and from at most 1 cm beyond. A viewer at x = 1 is answered by a quarter
+/// beyond x = 1, which takes what was seen from the squares just across its border (no floors,
+/// so that nothing but the samples counts; the sampler's unit test
+/// `a_view_cell_takes_what_was_seen_from_the_squares_around_it` checks the rule itself).
+#[test]
+fn a_viewer_on_the_border_of_two_quarters_gets_what_is_seen_from_it() {
+    let mut b = hdov_testkit::scenes::SceneBuilder::default();
+    let v = Vec3::new;
+    // From x = 0, the scene's least x, the lattice's cells are 2 m: x = 1 is a quarter's border.
+    b.aabox(v(0.0, -0.3, 0.0), v(2.0, 0.0, 2.0));
+    b.aabox(v(1.0, -100.0, 2.45), v(20.0, 100.0, 2.55));
+    let far = b.aabox(v(0.9, -100.0, 30.0), v(1.0, 100.0, 30.5));
+    let mut scene = b.build();
+    scene.grid = Some(grid(&scene));
+    let tmp = tempfile::tempdir().unwrap();
+    let db = build_without_floors(&scene, &tmp.path().join("db"));
+    let naive = QueryParams { mode: Mode::Naive, eta: 0.0, ..Default::default() };
+    let sees = |p: Vec3| db.query(p, &naive).unwrap().items.iter().any(|i| i.kind == ItemKind::Object && i.id == far);
+    for z in [0.5, 1.5] {
+        let border = v(1.0, 1.5, z);
+        let (here, before) = (db.locate(border).unwrap(), db.locate(v(0.5, 1.5, z)).unwrap());
+        assert_eq!(here.0, before.0, "one lattice cell");
+        assert_eq!(here, db.locate(v(1.5, 1.5, z)).unwrap(), "answered by the quarter beyond");
+        assert!(sees(v(0.5, 1.5, z)) && sees(border), "z {z}");
+    }
 }
 
 /// Cells where viewers stand (quarters, sides of walls) are sharded with their lattice cells:

@@ -40,7 +40,7 @@ use crate::error::{Error, Param, Result};
 use crate::format::BakePhases;
 use crate::format::sampling::RayProbing;
 use crate::geom::Aabb;
-use crate::grid::{ViewCell, ViewGrid};
+use crate::grid::{ViewCell, ViewGrid, places_around};
 
 /// How far past its target a probe ray looks, in lengths of the ray to the target: the target lies
 /// on the object's surface, so a ray that meets the object meets it by then (the margin is for
@@ -805,10 +805,13 @@ impl CellSampler for Probe {
         let start = Instant::now();
         let caster = backend.ray_caster().expect("prepare refuses a backend without a ray caster");
         let part = ViewCell { bounds: cell.bounds, places };
-        let here = |p: Vec3| places >> part.square_of(p) & 1 == 1;
-        // Seen from these squares: what the region rays cast from them met, what probing
-        // measured from them; the rest of what the whole cell sees is searched for from points
-        // of their own, as a cell searches for its candidates.
+        // Seen from these squares and those around them: what the region rays cast from them
+        // met, what probing measured from them; the rest of what the whole cell sees is searched
+        // for from points of their own, as a cell searches for its candidates. The squares
+        // around count because a viewer on the view cell's border sees what is seen just
+        // across it, and views change continuously.
+        let around = places_around(places, cell.places);
+        let here = |p: Vec3| around >> part.square_of(p) & 1 == 1;
         let mut found = seen.clone();
         for (p, objects) in &self.placed {
             if here(*p) {
@@ -816,7 +819,23 @@ impl CellSampler for Probe {
             }
         }
         if let Some(finds) = self.region.get(&cell.id) {
-            found.extend(finds.iter().filter(|f| f.squares & places != 0).map(|f| f.object));
+            found.extend(finds.iter().filter(|f| f.squares & around != 0).map(|f| f.object));
+        }
+        // And what the region rays of the lattice cells beside met from the squares just across
+        // the border, where nothing stands between the two squares (a wall on the border).
+        for (n, pairs) in cell.grid.squares_across(cell.coords, places) {
+            let Some(finds) = self.region.get(&n) else { continue };
+            let coords = cell.grid.cell_coords(n);
+            let rays: Vec<(Vec3, Vec3)> = pairs
+                .iter()
+                .map(|&(their, own)| {
+                    let from = cell.grid.square_centre(cell.coords, own);
+                    (from, cell.grid.square_centre(coords, their) - from)
+                })
+                .collect();
+            let clear = caster.first_hits(&rays, 1.0);
+            let across = pairs.iter().zip(clear).filter(|(_, id)| *id == NO_OBJECT).fold(0u64, |m, (p, _)| m | 1 << p.0);
+            found.extend(finds.iter().filter(|f| f.squares & across != 0).map(|f| f.object));
         }
         let left: Vec<Candidate> = candidates
             .iter()
@@ -928,6 +947,55 @@ mod tests {
         let objects = |grid| corner_candidates(&site(grid)).into_keys().collect::<Vec<u32>>();
         assert_eq!(objects(&open), [1, 2]);
         assert_eq!(objects(&rooms), [1]);
+    }
+
+    /// A view cell refined from its lattice cell takes what the region rays met from the squares
+    /// around its own: beside it in its lattice cell, and across the lattice cell's border where
+    /// nothing stands between the two squares; not from squares farther off.
+    #[test]
+    fn a_view_cell_takes_what_was_seen_from_the_squares_around_it() {
+        use crate::grid::{ALL_PLACES, CellSet, QUARTERS};
+        // 5 × 1 × 5 lattice cells of 2 m from (100, 0, 100), viewers everywhere.
+        let grid = ViewGrid {
+            present: Some(CellSet::from_ids((0..25).collect())),
+            places: Some(vec![ALL_PLACES; 25]),
+            ..ViewGrid::new(Aabb::new(Vec3::new(100.0, 0.0, 100.0), Vec3::new(110.0, 1.0, 110.0)), [5, 1, 5])
+        };
+        let (id, coords, beside) = (12, [2, 0, 2], 13);
+        let square = |x: u32, z: u32| 1u64 << (z * 8 + x);
+        let find = |object: u32, squares: u64| RegionFind { object, origin: Vec3::ZERO, squares };
+        let cube = CubeMap::new(16);
+        let site = |grid| CellSite {
+            id,
+            coords,
+            bounds: Aabb::new(Vec3::new(104.0, 0.0, 104.0), Vec3::new(106.0, 1.0, 106.0)),
+            places: ALL_PLACES,
+            grid,
+            corners: &[],
+            nearby: &[],
+            nearby_at: &[],
+            object_bounds: &[],
+            cube: &cube,
+        };
+        let refined = |scene: &Scene| {
+            let mut probe = Probe::new(RayProbing::REGION);
+            // Object 1 met from the square beside the quarter (x 3), 2 from one farther off (x 1),
+            // 3 from the quarter itself; 4 from the cell beside along +x, just across (its x 0),
+            // 5 from that cell's far side (its x 7).
+            probe.region.insert(id, vec![find(1, square(3, 2)), find(2, square(1, 2)), find(3, square(5, 1))]);
+            probe.region.insert(beside, vec![find(4, square(0, 3)), find(5, square(7, 3))]);
+            let mut cpu = CpuBackend::new(scene, 16).unwrap();
+            let mut tally = Tally::new(0, &crate::progress::Quiet);
+            let found = probe.refine(&mut cpu, &site(&grid), QUARTERS[1], &HashSet::new(), &[], &mut tally).unwrap().unwrap();
+            let mut found: Vec<u32> = found.into_iter().collect();
+            found.sort_unstable();
+            found
+        };
+        assert_eq!(refined(&boxes()), [1, 3, 4]);
+        // A wall on the border between the two lattice cells: nothing from across it.
+        let mut walled = boxes();
+        walled.add_box("wall", Vec3::new(105.95, 0.0, 104.0), Vec3::new(106.05, 1.0, 106.0));
+        assert_eq!(refined(&walled), [1, 3]);
     }
 
     /// A candidate seen nearby is searched for from the NEAREST points outside geometry nearest

@@ -1,5 +1,6 @@
-//! Real game levels, measured as a user meets them (issue 31): each Quake III / OpenArena level
-//! (`.bsp`, from `tools/corpus/openarena.sh`) is converted to an OBJ with one group per shader,
+//! Real game levels, measured as a user meets them (issue 31): each Quake III-format level
+//! (`.bsp`, OpenArena's from `tools/corpus/openarena.sh`, Nexuiz's from `tools/corpus/nexuiz.sh`)
+//! is converted to an OBJ with one group per shader,
 //! as exporters write levels, built as `hdov build LEVEL.obj --cell-size C` builds it (cells
 //! where a viewer can stand, the default sampler, CPU backend), and asked from every place a
 //! player stands (spawn points and pick-ups, dropped to the floor, eyes 50 units up).
@@ -9,6 +10,7 @@
 //!
 //! ```sh
 //! tools/corpus/openarena.sh            # levels into tools/corpus/data/ (not in git)
+//! tools/corpus/nexuiz.sh               # another game's, as nexuiz-MAP.bsp
 //! cargo run --release -p hdov-tools --bin level-corpus -- tools/corpus/data/oa_dm1.bsp \
 //!     [--cell-size 2] [--objects file,geometry] [--samples S] [--single-mesh] [--resolution 128]
 //!     [--truth 256] [--csv OUT] [--chart OUT.svg] [--explain WRONG] [--check WRONG]
@@ -127,6 +129,9 @@ struct LevelRow {
     /// Texels of the truth the naive answers lack, of them those in features one texel wide,
     /// and those that show a back face ([`count_misses`]), over all viewpoints.
     missed_texels: [usize; 3],
+    /// Viewpoints on a border between view cells: on a quarter's or a lattice cell's edge along
+    /// x or z, where the query takes the view cell whose square holds the point (decision 135).
+    on_borders: usize,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -266,6 +271,7 @@ fn measure(
         refused: 0,
         answered: Vec::new(),
         missed_texels: [0; 3],
+        on_borders: views.iter().filter(|(_, eye)| on_border(&grid, *eye)).count(),
     };
     for (k, (class, eye)) in views.iter().enumerate() {
         let pvs = level.and_then(|l| l.cluster_at(*eye).map(|c| l.pvs_triangles(c) as f64)).unwrap_or(f64::NAN);
@@ -348,6 +354,15 @@ fn explain(
     }
 }
 
+/// Whether `p` lies on a quarter's or a lattice cell's edge along x or z.
+fn on_border(grid: &hdov::ViewGrid, p: Vec3) -> bool {
+    let half = grid.cell_size() / 2.0;
+    [0, 2].iter().any(|&a| {
+        let steps = (p[a] - grid.region.min[a]) / half[a];
+        (steps - steps.round()).abs() * half[a] < 1e-4
+    })
+}
+
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
     if n == 0 { f64::NAN } else { s / n as f64 }
@@ -370,6 +385,7 @@ fn print_level(r: &LevelRow) {
     println!(
         "  {thin} of the {missed} texels its answers missed lie in features one texel wide, {back} show a back face"
     );
+    println!("  {} of its {} viewpoints stand on a border between view cells", r.on_borders, r.viewpoints);
 }
 
 /// Of the texels of `ids` (a cube map by triangle) whose triangle `has`
