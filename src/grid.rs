@@ -368,6 +368,9 @@ impl ViewGrid {
     /// border: per such neighbour, its id and each of those squares' bits with the bit of one
     /// of `places` it touches. Without [`ViewGrid::places`], none.
     pub fn squares_across(&self, c: [u32; 3], places: u64) -> Vec<(usize, Vec<(u32, u32)>)> {
+        if self.places.is_none() {
+            return Vec::new();
+        }
         let edge = PLACES_PER_EDGE as i64;
         let mut out = Vec::new();
         for (dx, dz) in [(-1i64, -1i64), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
@@ -403,10 +406,7 @@ impl ViewGrid {
 
     /// The centre of square `bit` of lattice cell `c`'s footprint, half way up the cell.
     pub fn square_centre(&self, c: [u32; 3], bit: u32) -> Vec3 {
-        let b = self.cell_box(c);
-        let edge = PLACES_PER_EDGE as f32;
-        let at = Vec3::new(((bit % PLACES_PER_EDGE) as f32 + 0.5) / edge, 0.5, ((bit / PLACES_PER_EDGE) as f32 + 0.5) / edge);
-        b.min + at * b.extent()
+        ViewCell { bounds: self.cell_box(c), places: 1 << bit }.point(Vec3::splat(0.5))
     }
 
     /// The squares of lattice cell `id` where viewers stand, in any of its view cells.
@@ -731,6 +731,9 @@ mod tests {
         assert_eq!(places_around(east & QUARTERS[1], west | east) & west, 0);
         // Only squares where viewers stand.
         assert_eq!(places_around(QUARTERS[0], QUARTERS[0] | QUARTERS[1]) & (QUARTERS[2] | QUARTERS[3]), 0);
+        // A square touching at a corner only, in another part (no 4-neighbour joins them).
+        assert_eq!(places_around(mask(&[(0, 0)]), mask(&[(0, 0), (1, 1)])), mask(&[(0, 0)]));
+        assert_eq!(places_around(mask(&[(0, 0)]), mask(&[(0, 0), (1, 0), (1, 1)])), mask(&[(0, 0), (1, 0), (1, 1)]));
     }
 
     #[test]

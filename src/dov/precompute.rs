@@ -350,8 +350,10 @@ pub fn precompute_shard(
                 }
                 // A view cell that confirms most of what its lattice cell sees takes all of it:
                 // what it would leave out is little, and most likely what it sees through gaps
-                // too thin for its rays.
-                if seen.len() as f64 >= REFINED_TAKES_WHOLE * seen_whole.len() as f64 {
+                // too thin for its rays. What it took from across its lattice cell's border does
+                // not count towards that share.
+                let confirmed = seen.iter().filter(|o| seen_whole.contains(o)).count();
+                if confirmed as f64 >= REFINED_TAKES_WHOLE * seen_whole.len() as f64 {
                     seen.extend(&seen_whole);
                 }
                 let part = crate::grid::ViewCell { bounds: cell_box, places: child_places }.places_box();

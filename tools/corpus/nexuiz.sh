@@ -7,7 +7,7 @@
 #
 #   tools/corpus/nexuiz.sh [MAP ...]     e.g. downer ruiner basement toxic
 set -euo pipefail
-maps=("${@:-downer ruiner toxic}")
+maps=("${@:-downer ruiner basement}")
 read -r -a maps <<<"${maps[*]}"
 exec "$(dirname "$0")/pk3-levels.sh" nexuiz-data ./usr/share/games/nexuiz/data/data.pk3 \
   ./usr/share/doc/nexuiz-data/copyright nexuiz- "${maps[@]}"

@@ -6,6 +6,10 @@
 #
 #   tools/corpus/pk3-levels.sh PACKAGE PK3_IN_PACKAGE COPYRIGHT_IN_PACKAGE PREFIX MAP...
 set -euo pipefail
+if [ $# -lt 5 ]; then
+  echo "usage: $0 PACKAGE PK3_IN_PACKAGE COPYRIGHT_IN_PACKAGE PREFIX MAP..." >&2
+  exit 2
+fi
 cd "$(dirname "$0")"
 package=$1 inside=$2 copyright=$3 prefix=$4
 shift 4
@@ -20,15 +24,22 @@ if [ -z "$deb" ]; then
   fi
   deb=$(ls data/"${package}"_*.deb | head -1)
 fi
-pk3=data/$(basename "$inside")
-[ "$pk3" = data/data.pk3 ] && pk3=data/$package.pk3
+pk3=data/$package.pk3
 if [ ! -f "$pk3" ]; then
   dpkg-deb --fsys-tarfile "$deb" | tar -xO "$inside" >"$pk3.tmp"
   mv "$pk3.tmp" "$pk3"
-  dpkg-deb --fsys-tarfile "$deb" | tar -xO "$copyright" >"data/COPYRIGHT-$package"
 fi
+[ -f "data/COPYRIGHT-$package" ] || dpkg-deb --fsys-tarfile "$deb" | tar -xO "$copyright" >"data/COPYRIGHT-$package"
 for m in "$@"; do
-  python3 -c "import sys, zipfile; open(sys.argv[3], 'wb').write(zipfile.ZipFile(sys.argv[1]).read('maps/' + sys.argv[2] + '.bsp'))" \
+  # Read before the output is opened: a map the archive lacks leaves no empty file behind.
+  python3 -c "
+import sys, zipfile
+name = 'maps/' + sys.argv[2] + '.bsp'
+try:
+    b = zipfile.ZipFile(sys.argv[1]).read(name)
+except KeyError:
+    sys.exit(sys.argv[1] + ': no ' + name)
+open(sys.argv[3], 'wb').write(b)" \
     "$pk3" "$m" "data/$prefix$m.bsp"
   echo "data/$prefix$m.bsp"
 done

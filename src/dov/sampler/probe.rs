@@ -834,6 +834,7 @@ impl CellSampler for Probe {
                 })
                 .collect();
             let clear = caster.first_hits(&rays, 1.0);
+            tally.probe_rays += rays.len() as u64;
             let across = pairs.iter().zip(clear).filter(|(_, id)| *id == NO_OBJECT).fold(0u64, |m, (p, _)| m | 1 << p.0);
             found.extend(finds.iter().filter(|f| f.squares & across != 0).map(|f| f.object));
         }
