@@ -373,12 +373,17 @@ impl ViewGrid {
         }
         let edge = PLACES_PER_EDGE as i64;
         let mut out = Vec::new();
-        for (dx, dz) in [(-1i64, -1i64), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
-            let (nx, nz) = (i64::from(c[0]) + dx, i64::from(c[2]) + dz);
-            if nx < 0 || nz < 0 || nx >= i64::from(self.dims[0]) || nz >= i64::from(self.dims[2]) {
+        // The lattice cells one step away along x and z on the layer, clipped to the grid.
+        let range = |a: usize| match a {
+            1 => c[1]..=c[1],
+            _ => c[a].saturating_sub(1)..=(c[a] + 1).min(self.dims[a] - 1),
+        };
+        for n in lattice_block(range, |p| self.cell_id(p)) {
+            let nc = self.cell_coords(n);
+            if nc == c {
                 continue;
             }
-            let n = self.cell_id([nx as u32, c[1], nz as u32]);
+            let (dx, dz) = (i64::from(nc[0]) - i64::from(c[0]), i64::from(nc[2]) - i64::from(c[2]));
             let theirs = self.lattice_places(n);
             let mut pairs = Vec::new();
             let mut left = if theirs == 0 { 0 } else { places };
