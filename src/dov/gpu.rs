@@ -9,8 +9,10 @@
 //! is thus the base meshes once plus 52 bytes per object, instead of every instance's
 //! triangles in world space (docs/dov.md, "GPU memory").
 //!
-//! **Draw order is descending id**, as the CPU backend's tie rule needs: with a `GreaterEqual`
-//! reverse-Z depth test the later-drawn lower id wins an exact depth tie. Instances lie in the
+//! **Draw order is descending id**, as the CPU backend's tie rule needs among faces seen from one
+//! side: with a `GreaterEqual` reverse-Z depth test the later-drawn lower id wins an exact depth
+//! tie (the CPU's front-before-back at ties has no GPU counterpart: a rasteriser gives a pixel on
+//! an edge to one triangle, so edges do not tie). Instances lie in the
 //! instance buffer in descending id order; per face, the objects that survive the frustum test
 //! become draw commands in that order, consecutive objects with the same base mesh and level
 //! merged into one instanced draw. Where the device has indirect draws with a first instance

@@ -177,7 +177,7 @@ pub trait DovBackend {
 
     /// Renders the id cube around `p` into `out` (which must have this backend's resolution):
     /// for every texel, the nearest surface along the texel's centre direction beyond the near
-    /// plane. Equal depths go to the lower object id.
+    /// plane. Equal depths go to a front face, then the lower object id (the GPU: the lower id).
     fn render_ids(&mut self, p: Vec3, out: &mut IdCube) -> Result<()>;
 
     /// Point DoV of every object seen from `p`.

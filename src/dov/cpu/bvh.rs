@@ -1,14 +1,15 @@
 //! The CPU backend's two-level BVH: one bottom level per base mesh that two or more objects
 //! instance, one over the world-space triangles of every other object, and the triangles with
-//! their edges precomputed for the ray test.
-
-use std::time::Duration;
+//! their normals precomputed for the (watertight) ray test.
 
 use glam::{Affine3A, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb as BvhAabb,
-    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    bvh2::reinsertion::ReinsertionOptimizer,
+    cwbvh::{CwBvh, bvh2_to_cwbvh::bvh2_to_cwbvh},
+    ploc::PlocBuilder,
+    splits::split_aabbs_preset,
     ray::Ray,
     triangle::Triangle,
 };
@@ -87,43 +88,46 @@ impl Blas {
     }
 }
 
-/// A triangle with the edges and normal of obvhs's Möller–Trumbore test precomputed: the test
-/// below is [`Triangle::intersect`]'s arithmetic operation for operation (so hits and `t` are
-/// bit-identical, tested), less the two edge differences and the cross product per test.
-/// Aligned to a cache line, so that a triangle test touches one line, not two (its 64 bytes at
-/// `Vec3A`'s alignment of 16 straddled two lines three times in four).
+/// A triangle as the ray test reads it: its corners and its normal. The test is watertight: a
+/// ray cannot pass between two triangles that share an edge (docs/dov.md, "Watertight
+/// triangles"). Aligned to a cache line, so that a triangle test touches one line, not two (its
+/// 64 bytes at `Vec3A`'s alignment of 16 straddled two lines three times in four).
 #[derive(Clone, Copy, Debug)]
 #[repr(align(64))]
 pub(super) struct RayTriangle {
     pub(super) v0: Vec3A,
-    /// `v0 − v1` and `v2 − v0`, the order obvhs uses.
-    pub(super) e1: Vec3A,
-    pub(super) e2: Vec3A,
-    /// `e1 × e2`: minus the counter-clockwise normal `(v1 − v0) × (v2 − v0)`, exactly (negation
-    /// is exact in floating point).
+    pub(super) v1: Vec3A,
+    pub(super) v2: Vec3A,
+    /// `(v0 − v1) × (v2 − v0)`: minus the counter-clockwise normal `(v1 − v0) × (v2 − v0)`,
+    /// exactly (negation is exact in floating point).
     pub(super) n: Vec3A,
 }
 
 impl RayTriangle {
     pub(super) fn new(t: &Triangle) -> Self {
-        let (e1, e2) = (t.v0 - t.v1, t.v2 - t.v0);
-        Self { v0: t.v0, e1, e2, n: e1.cross(e2) }
+        Self { v0: t.v0, v1: t.v1, v2: t.v2, n: (t.v0 - t.v1).cross(t.v2 - t.v0) }
     }
 
     /// `t` of the hit with `tmin ≤ t ≤ tmax`, or infinity.
+    ///
+    /// The ray meets the triangle where it lies on the same side of the three planes through its
+    /// origin and an edge: the signs of `d · (a × b)` for the corners `a`, `b` of each edge taken
+    /// from the origin (zero, a ray through an edge, counts as either side). Each of those
+    /// numbers is computed from its edge's two corners alone, so a neighbour sharing the edge
+    /// computes the same number, or its exact negation where it runs the other way (products
+    /// commute, and `x − y = −(y − x)` exactly): the two triangles can never both reject the ray
+    /// by rounding. Möller–Trumbore's barycentrics, computed from each triangle's own first corner,
+    /// can, and rays through seams are common where a scene and its viewpoints lie on a grid.
     #[inline(always)]
     pub(super) fn intersect(&self, ray: &Ray) -> f32 {
-        let c = self.v0 - ray.origin;
-        let r = ray.direction.cross(c);
-        let inv_det = 1.0 / self.n.dot(ray.direction);
-        let u = r.dot(self.e2) * inv_det;
-        let v = r.dot(self.e1) * inv_det;
-        let w = 1.0 - u - v;
-        // A sign bit in u, v or w (−0.0 included, as obvhs) is a miss.
-        let signs = u.to_bits() | v.to_bits() | w.to_bits();
-        if inv_det != 0.0 && signs & 0x8000_0000 == 0 {
-            let t = self.n.dot(c) * inv_det;
-            if t >= ray.tmin && t <= ray.tmax {
+        let d = ray.direction;
+        let (a, b, c) = (self.v0 - ray.origin, self.v1 - ray.origin, self.v2 - ray.origin);
+        let (u, v, w) = (d.dot(b.cross(c)), d.dot(c.cross(a)), d.dot(a.cross(b)));
+        let inv_det = 1.0 / self.n.dot(d);
+        if (u >= 0.0 && v >= 0.0 && w >= 0.0) || (u <= 0.0 && v <= 0.0 && w <= 0.0) {
+            // A ray along the plane (n · d = 0) gets t = ±∞ or NaN, out of every range.
+            let t = self.n.dot(a) * inv_det;
+            if t >= ray.tmin && t <= ray.tmax.min(f32::MAX) {
                 return t;
             }
         }
@@ -168,11 +172,47 @@ pub(super) fn build_blas(scene: &Scene, source: &BlasSource) -> Option<Blas> {
     } else {
         BvhBuildParams::slow_build()
     };
-    let bvh = build_cwbvh_from_tris(&tris, params, &mut Duration::default());
+    let bvh = build_cwbvh_padded(&tris, params);
     let triangles = bvh.primitive_indices.iter().map(|&i| RayTriangle::new(&tris[i as usize])).collect();
     let objects =
         if objects.is_empty() { objects } else { bvh.primitive_indices.iter().map(|&i| objects[i as usize]).collect() };
     Some(Blas { bvh, triangles, objects })
+}
+
+/// obvhs's `build_cwbvh_from_tris` with every leaf box grown by a little more than a box test's
+/// rounding ([`padded_box`]). A ray through an edge that two triangles share lies on the faces of
+/// both their boxes, where the slab test's rounding decides whether it enters either: a flat box
+/// (a wall's triangles in a plane) can be missed by every ray along its rim, and the watertight
+/// triangle test never sees them.
+fn build_cwbvh_padded(tris: &[Triangle], config: BvhBuildParams) -> CwBvh {
+    let mut aabbs: Vec<BvhAabb> = tris.iter().map(Triangle::aabb).collect();
+    let mut indices: Vec<u32> = (0..tris.len() as u32).collect();
+    if config.pre_split {
+        let halves: Vec<f32> = aabbs.iter().map(BvhAabb::half_area).collect();
+        let largest = halves.iter().copied().fold(0.0, f32::max);
+        let mean = halves.iter().sum::<f32>() / halves.len() as f32;
+        split_aabbs_preset(&mut aabbs, &mut indices, tris, mean, largest);
+    }
+    for b in &mut aabbs {
+        *b = padded_box(*b);
+    }
+    let mut bvh2 = PlocBuilder::with_capacity(aabbs.len()).build(
+        config.ploc_search_distance,
+        &aabbs,
+        indices,
+        config.sort_precision,
+        config.search_depth_threshold,
+    );
+    bvh2.uses_spatial_splits = config.pre_split;
+    ReinsertionOptimizer::default().run(&mut bvh2, config.reinsertion_batch_ratio, None);
+    bvh2_to_cwbvh(&bvh2, config.max_prims_per_leaf.clamp(1, 3), true, false)
+}
+
+/// `b` grown by 4e-6 of its largest coordinate and 1e-6 m: several times the rounding of a slab
+/// test's `t` (a few ulps) at any distance up to the box's own coordinates.
+fn padded_box(b: BvhAabb) -> BvhAabb {
+    let pad = b.min.abs().max(b.max.abs()).max_element() * 4e-6 + 1e-6;
+    BvhAabb::new(b.min - Vec3A::splat(pad), b.max + Vec3A::splat(pad))
 }
 
 pub(super) fn triangle(t: [Vec3; 3]) -> Triangle {

@@ -43,8 +43,8 @@ pub use bvh::world_triangles;
 use bvh::{Blas, BlasSource, Instance, build_blas, inverse_affine, padded};
 use trace::{TexelState, TieWindow};
 
-/// Two hits whose ray parameters differ by less than this fraction are a tie; the lower object id
-/// wins. Coplanar faces of two objects otherwise flicker between them with rounding.
+/// Two hits whose ray parameters differ by less than this fraction are a tie; a front face wins,
+/// then the lower object id. Coplanar faces of two objects otherwise flicker between them with rounding.
 pub const TIE_EPSILON: f32 = 1e-5;
 /// Relative depth within which two surfaces are a tie up to `f32` rounding of rays that start
 /// within about `near` of them (tests of the fast path, [`CpuBackend::surfaces_at_nearest`]).
@@ -566,18 +566,65 @@ mod tests {
             }
         }
 
-        /// The precomputed test is obvhs's, bit for bit: the fast path and the reference tracer may
-        /// then differ in nothing but the order in which they meet triangles.
+        /// Away from its edges the test agrees with obvhs's Möller–Trumbore test (the same hit and
+        /// `t` within rounding); the back-face sign is minus the counter-clockwise normal's.
         #[test]
-        fn ray_triangle_is_obvhs_triangle_bit_for_bit(
+        fn ray_triangle_agrees_with_obvhs_away_from_edges(
             v in [vec3a(), vec3a(), vec3a()], o in vec3a(), d in vec3a(), tmin in 0.0f32..0.5, tmax in 0.5f32..20.0,
         ) {
             let tri = Triangle { v0: v[0], v1: v[1], v2: v[2] };
             let ray = Ray { origin: o, direction: d, inv_direction: d.recip(), tmin, tmax };
-            prop_assert_eq!(RayTriangle::new(&tri).intersect(&ray).to_bits(), tri.intersect(&ray).to_bits());
-            // The back-face sign: e1 × e2 is minus (v1 − v0) × (v2 − v0), exactly.
+            let (ours, theirs) = (RayTriangle::new(&tri).intersect(&ray), tri.intersect(&ray));
+            // Barycentrics and t in f64: clear of every edge, of the plane and of the range.
+            let [a, b, c, o, d] = [tri.v0, tri.v1, tri.v2, o, d].map(|p| p.as_dvec3());
+            let n = (b - a).cross(c - a);
+            let det = n.dot(d);
+            let t = n.dot(a - o) / det;
+            let edge = |p: glam::DVec3, q: glam::DVec3| d.dot((p - o).cross(q - o)) / det;
+            let bary = [edge(b, c), edge(c, a), edge(a, b)];
+            let scale = (b - a).length() * (c - a).length() + (a - o).length_squared() + 1.0;
+            let clear = det.abs() > 1e-3 * n.length() * d.length()
+                && bary.iter().all(|w| w.abs() > 1e-4 * scale)
+                && (t - f64::from(tmin)).abs() > 1e-4 * (1.0 + t.abs())
+                && (t - f64::from(tmax)).abs() > 1e-4 * (1.0 + t.abs());
+            if clear {
+                prop_assert_eq!(ours.is_finite(), theirs.is_finite(), "t {} against obvhs's {}", ours, theirs);
+                if ours.is_finite() {
+                    prop_assert!((ours - theirs).abs() <= 1e-4 * (1.0 + theirs.abs()), "t {} against obvhs's {}", ours, theirs);
+                }
+            }
             let ccw = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0);
-            prop_assert_eq!(RayTriangle::new(&tri).seen_from_behind(d), ccw.dot(d) > 0.0);
+            prop_assert_eq!(RayTriangle::new(&tri).seen_from_behind(d.as_vec3a()), ccw.dot(d.as_vec3a()) > 0.0);
+        }
+
+        /// Watertight: a ray towards a point of an edge two triangles share (either way round,
+        /// in a plane or folded) hits at least one of them, whatever the rounding.
+        #[test]
+        fn a_ray_through_a_shared_edge_hits_one_of_its_triangles(
+            p in vec3a(), q in vec3a(), r in vec3a(), fold in vec3a(), o in vec3a(),
+            along in 0.05f32..0.95, flip in any::<bool>(),
+        ) {
+            // Triangles p q r and q p s (or p q s, wound the same way), s across the edge from r.
+            let mid = 0.5 * (p + q);
+            let s = mid - (r - mid) + 0.5 * fold;
+            let a = Triangle { v0: p, v1: q, v2: r };
+            let b = if flip { Triangle { v0: p, v1: q, v2: s } } else { Triangle { v0: q, v1: p, v2: s } };
+            let target = p + (q - p) * along;
+            let d = target - o;
+            let normal_a = (q - p).cross(r - p);
+            let normal_b = (q - p).cross(s - p);
+            // Only where the two lie on two sides of the edge seen from the origin (else the edge
+            // is a silhouette, and a ray just past it rightly misses both), clear of rays along a
+            // triangle's plane (they may graze both).
+            let edge_plane = (p - o).cross(q - o);
+            let side = |x: Vec3A| edge_plane.dot(x - o) / (edge_plane.length() * (x - o).length());
+            let grazing = |n: Vec3A| n.dot(d).abs() <= 1e-3 * n.length() * d.length();
+            prop_assume!(normal_a.length() > 1e-3 && normal_b.length() > 1e-3 && d.length() > 1e-2);
+            prop_assume!((q - p).length() > 1e-2 && !grazing(normal_a) && !grazing(normal_b));
+            prop_assume!(side(r) * side(s) < -1e-6);
+            let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+            let (ta, tb) = (RayTriangle::new(&a).intersect(&ray), RayTriangle::new(&b).intersect(&ray));
+            prop_assert!(ta.is_finite() || tb.is_finite(), "the ray passes between the two triangles");
         }
 
         /// The tie window's id does not depend on the order hits arrive in (as long as each is

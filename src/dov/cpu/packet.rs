@@ -397,48 +397,53 @@ pub(super) fn intersect_triangle<O: Origins>(
     tmax: Lanes,
     lanes: u32,
 ) -> (u32, Lanes, u32) {
-    // c = v0 − origin, and n · c: once for a shared origin, lane by lane for lanes' own.
-    let (c, n_dot_c) = if O::PER_LANE {
-        (Vec3A::ZERO, 0.0)
+    // The corners from the origin, the edges' normals a × b and n · a: once for a shared origin,
+    // lane by lane for lanes' own.
+    let shared = if O::PER_LANE {
+        None
     } else {
-        let c = tri.v0 - p.origin.shared();
-        (c, tri.n.dot(c))
+        let o = p.origin.shared();
+        let (a, b, c) = (tri.v0 - o, tri.v1 - o, tri.v2 - o);
+        Some(([b.cross(c), c.cross(a), a.cross(b)], tri.n.dot(a)))
     };
     let (mut hits, mut back, mut ts) = (0, 0, [_mm256_setzero_ps(); HALVES]);
+    let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
+    // (x·v.x + y·v.y) + z·v.z, glam's order.
+    let dot_with = |[x, y, z]: [__m256; 3], v: Vec3A| {
+        add(add(mul(x, _mm256_set1_ps(v.x)), mul(y, _mm256_set1_ps(v.y))), mul(z, _mm256_set1_ps(v.z)))
+    };
+    let dot_lanes = |[x, y, z]: [__m256; 3], [vx, vy, vz]: [__m256; 3]| add(add(mul(x, vx), mul(y, vy)), mul(z, vz));
+    // glam's cross product, lane by lane: x = a.y·b.z − a.z·b.y, … (each product as glam rounds it).
+    let cross_lanes = |[ax, ay, az]: [__m256; 3], [bx, by, bz]: [__m256; 3]| {
+        [sub(mul(ay, bz), mul(az, by)), sub(mul(az, bx), mul(ax, bz)), sub(mul(ax, by), mul(ay, bx))]
+    };
+    let zero = _mm256_setzero_ps();
     for h in 0..HALVES {
-        let [dx, dy, dz] = [p.dir[0][h], p.dir[1][h], p.dir[2][h]];
-        let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
-        // a · b = (a.x·b.x + a.y·b.y) + a.z·b.z, glam's order.
-        let dot = |x, y, z, v: Vec3A| {
-            add(add(mul(x, _mm256_set1_ps(v.x)), mul(y, _mm256_set1_ps(v.y))), mul(z, _mm256_set1_ps(v.z)))
+        let d = [p.dir[0][h], p.dir[1][h], p.dir[2][h]];
+        let ([u, v, w], n_dot_a) = match shared {
+            Some((edges, n_dot_a)) => (edges.map(|e| dot_with(d, e)), _mm256_set1_ps(n_dot_a)),
+            None => {
+                let o = p.origin.lanes();
+                let from = |v: Vec3A| std::array::from_fn::<_, 3, _>(|k| sub(_mm256_set1_ps(v[k]), o[k][h]));
+                let (a, b, c) = (from(tri.v0), from(tri.v1), from(tri.v2));
+                let edges = [cross_lanes(b, c), cross_lanes(c, a), cross_lanes(a, b)];
+                (edges.map(|e| dot_lanes(d, e)), dot_with(a, tri.n))
+            }
         };
-        let (cx, cy, cz, n_dot_c) = if O::PER_LANE {
-            let o = p.origin.lanes();
-            let axis = |a: usize| sub(_mm256_set1_ps(tri.v0[a]), o[a][h]);
-            let (cx, cy, cz) = (axis(0), axis(1), axis(2));
-            (cx, cy, cz, dot(cx, cy, cz, tri.n))
-        } else {
-            (_mm256_set1_ps(c.x), _mm256_set1_ps(c.y), _mm256_set1_ps(c.z), _mm256_set1_ps(n_dot_c))
-        };
-        // r = d × c (glam's order: x = d.y·c.z − d.z·c.y, …).
-        let rx = sub(mul(dy, cz), mul(dz, cy));
-        let ry = sub(mul(dz, cx), mul(dx, cz));
-        let rz = sub(mul(dx, cy), mul(dy, cx));
-        let n_dot_d = dot(dx, dy, dz, tri.n);
+        // All three ≥ 0 or all three ≤ 0.
+        let (ge, le) = (|x| _mm256_cmp_ps::<_CMP_GE_OQ>(x, zero), |x| _mm256_cmp_ps::<_CMP_LE_OQ>(x, zero));
+        let and3 = |a, b, c| _mm256_and_ps(_mm256_and_ps(a, b), c);
+        let inside = _mm256_or_ps(and3(ge(u), ge(v), ge(w)), and3(le(u), le(v), le(w)));
+        let n_dot_d = dot_with(d, tri.n);
         let inv_det = _mm256_div_ps(_mm256_set1_ps(1.0), n_dot_d);
-        let u = mul(dot(rx, ry, rz, tri.e2), inv_det);
-        let v = mul(dot(rx, ry, rz, tri.e1), inv_det);
-        let w = sub(sub(_mm256_set1_ps(1.0), u), v);
-        let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
-        let det_nonzero = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
-        let t = mul(n_dot_c, inv_det);
+        let t = mul(n_dot_a, inv_det);
         let in_range = _mm256_and_ps(
             _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(tmin)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax[h]),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_min_ps(tmax[h], _mm256_set1_ps(f32::MAX))),
         );
-        hits |= (det_nonzero & !signs & _mm256_movemask_ps(in_range) as u32) << (8 * h);
+        hits |= (_mm256_movemask_ps(_mm256_and_ps(inside, in_range)) as u32) << (8 * h);
         // `RayTriangle::seen_from_behind`: n · d < 0.
-        back |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, _mm256_setzero_ps())) as u32) << (8 * h);
+        back |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(n_dot_d, zero)) as u32) << (8 * h);
         ts[h] = t;
     }
     (hits & lanes, ts, back)

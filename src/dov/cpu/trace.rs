@@ -130,9 +130,10 @@ impl packet::LaneBounds for LaneWindows {
 
 /// The hits of one ray inside the tie window of the nearest so far, `t ≤ t_near·(1 + ε)`. The
 /// ray's id is a function of the set of its hits alone, whatever order a traversal finds them in:
-/// the lowest object id in the window, its nearest triangle there, a front face before a back face
-/// at equal `t` (docs/decisions.md, 41). So any traversal order, BVH or early bound gives the id
-/// the reference tracer gives.
+/// a front face before a back face, then the lowest object id, its nearest triangle there
+/// (docs/decisions.md, 41 and 136). So any traversal order, BVH or early bound gives the id the
+/// reference tracer gives. Front first because a ray through the edge of a solid meets the face it
+/// sees and, at the same `t`, the face behind the edge: the watertight test hits both.
 #[derive(Default)]
 pub(super) struct TieWindow {
     pub(super) hits: Vec<Hit>,
@@ -162,7 +163,7 @@ impl TieWindow {
 
     /// The winning hit, if any.
     pub(super) fn winner(&self) -> Option<&Hit> {
-        self.hits.iter().min_by(|a, b| a.obj.cmp(&b.obj).then(a.t.total_cmp(&b.t)).then(a.back.cmp(&b.back)))
+        self.hits.iter().min_by(|a, b| a.back.cmp(&b.back).then(a.obj.cmp(&b.obj)).then(a.t.total_cmp(&b.t)))
     }
 
     pub(super) fn id(&self) -> u32 {
@@ -172,8 +173,9 @@ impl TieWindow {
 
 impl CpuBackend {
     /// The id seen from `origin` along `dir` (a texel direction whose forward component is 1):
-    /// among the hits with `t ≥ near`, those within [`TIE_EPSILON`] of the nearest are ties and the
-    /// lower object id wins, with [`BACK_FACE_BIT`] when its triangle faces away. The reference
+    /// among the hits with `t ≥ near`, those within [`TIE_EPSILON`] of the nearest are ties, where a
+    /// front face wins, then the lower object id, with [`BACK_FACE_BIT`] when its triangle faces
+    /// away ([`TieWindow`]). The reference
     /// tracer: one plain obvhs traversal of the TLAS, and of the BLAS of each instance box the ray
     /// enters before its nearest hit's tie window.
     pub fn trace(&self, origin: Vec3, dir: Vec3) -> u32 {
