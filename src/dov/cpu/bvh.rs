@@ -2,7 +2,7 @@
 //! instance, one over the world-space triangles of every other object, and the triangles with
 //! their normals precomputed for the (watertight) ray test.
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{Affine3A, Vec3, Vec3A, Vec3Swizzles};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb as BvhAabb,
@@ -105,7 +105,7 @@ pub(super) struct RayTriangle {
 
 impl RayTriangle {
     pub(super) fn new(t: &Triangle) -> Self {
-        Self { v0: t.v0, v1: t.v1, v2: t.v2, n: (t.v0 - t.v1).cross(t.v2 - t.v0) }
+        Self { v0: t.v0, v1: t.v1, v2: t.v2, n: cross(t.v0 - t.v1, t.v2 - t.v0) }
     }
 
     /// `t` of the hit with `tmin ≤ t ≤ tmax`, or infinity.
@@ -122,7 +122,7 @@ impl RayTriangle {
     pub(super) fn intersect(&self, ray: &Ray) -> f32 {
         let d = ray.direction;
         let (a, b, c) = (self.v0 - ray.origin, self.v1 - ray.origin, self.v2 - ray.origin);
-        let (u, v, w) = (d.dot(b.cross(c)), d.dot(c.cross(a)), d.dot(a.cross(b)));
+        let (u, v, w) = (d.dot(cross(b, c)), d.dot(cross(c, a)), d.dot(cross(a, b)));
         let inv_det = 1.0 / self.n.dot(d);
         if (u >= 0.0 && v >= 0.0 && w >= 0.0) || (u <= 0.0 && v <= 0.0 && w <= 0.0) {
             // A ray along the plane (n · d = 0) gets t = ±∞ or NaN, out of every range.
@@ -140,6 +140,15 @@ impl RayTriangle {
     pub(super) fn seen_from_behind(&self, dir: Vec3A) -> bool {
         self.n.dot(dir) < 0.0
     }
+}
+
+/// `a × b` as the packet test computes it lane by lane (x = a.y·b.z − a.z·b.y, …), by plain
+/// products and differences. glam's own `cross` fuses them into FMAs where glam is compiled with
+/// FMA (`-C target-cpu=native`, say), and then `a × b` is no longer exactly `−(b × a)`, which the
+/// watertight test rests on.
+#[inline(always)]
+pub(super) fn cross(a: Vec3A, b: Vec3A) -> Vec3A {
+    a.yzx() * b.zxy() - a.zxy() * b.yzx()
 }
 
 /// Builds one BLAS; `None` when it has no triangles.

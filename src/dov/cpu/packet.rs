@@ -18,7 +18,7 @@ use std::arch::x86_64::*;
 use glam::{Affine3A, Vec3A};
 use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 
-use super::bvh::{NODE_TMIN, RayTriangle};
+use super::bvh::{NODE_TMIN, RayTriangle, cross};
 use crate::dov::cubemap::FaceBasis;
 
 /// A packet's texels: `PACKET_COLS` columns of `PACKET_ROWS` rows, lane `row · COLS + col`
@@ -404,7 +404,7 @@ pub(super) fn intersect_triangle<O: Origins>(
     } else {
         let o = p.origin.shared();
         let (a, b, c) = (tri.v0 - o, tri.v1 - o, tri.v2 - o);
-        Some(([b.cross(c), c.cross(a), a.cross(b)], tri.n.dot(a)))
+        Some(([cross(b, c), cross(c, a), cross(a, b)], tri.n.dot(a)))
     };
     let (mut hits, mut back, mut ts) = (0, 0, [_mm256_setzero_ps(); HALVES]);
     let (mul, add, sub) = (|a, b| _mm256_mul_ps(a, b), |a, b| _mm256_add_ps(a, b), |a, b| _mm256_sub_ps(a, b));
@@ -413,7 +413,7 @@ pub(super) fn intersect_triangle<O: Origins>(
         add(add(mul(x, _mm256_set1_ps(v.x)), mul(y, _mm256_set1_ps(v.y))), mul(z, _mm256_set1_ps(v.z)))
     };
     let dot_lanes = |[x, y, z]: [__m256; 3], [vx, vy, vz]: [__m256; 3]| add(add(mul(x, vx), mul(y, vy)), mul(z, vz));
-    // glam's cross product, lane by lane: x = a.y·b.z − a.z·b.y, … (each product as glam rounds it).
+    // `bvh::cross`, lane by lane: x = a.y·b.z − a.z·b.y, …
     let cross_lanes = |[ax, ay, az]: [__m256; 3], [bx, by, bz]: [__m256; 3]| {
         [sub(mul(ay, bz), mul(az, by)), sub(mul(az, bx), mul(ax, bz)), sub(mul(ax, by), mul(ay, bx))]
     };

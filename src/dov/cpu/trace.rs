@@ -240,7 +240,7 @@ impl CpuBackend {
     /// [`CpuBackend::trace`]'s id by a faster route. The previous texel's winning triangle is
     /// tested first, and its tie window bounds the traversal from the start, which then skips
     /// every box behind it; a scene whose TLAS holds one instance (no instancing) goes straight to
-    /// its BLAS; triangles carry their precomputed edges. The id depends only on the set of hits
+    /// its BLAS; triangles carry their precomputed normals. The id depends only on the set of hits
     /// the BVH lets through inside the tie window, which every route finds whole, so it equals
     /// `trace`'s. The bound is only trusted once the traversal itself reaches a hit at least as
     /// near: a ray grazing a box edge can hit a triangle whose box test it fails (rounding), and
