@@ -74,6 +74,15 @@ impl Aabb {
         self.min.cmple(o.max).all() && self.max.cmpge(o.min).all()
     }
 
+    /// The largest `n · p` over the box's points `p` (at its corner furthest along `n`); minus
+    /// infinity for an empty box.
+    pub fn max_along(&self, n: Vec3) -> f32 {
+        if self.is_empty() {
+            return f32::NEG_INFINITY;
+        }
+        n.dot(self.center()) + n.abs().dot(0.5 * self.extent())
+    }
+
     /// The distance between the nearest points of the two boxes (0 where they meet).
     pub fn distance(&self, o: &Aabb) -> f32 {
         (o.min - self.max).max(self.min - o.max).max(Vec3::ZERO).length()
@@ -137,4 +146,35 @@ pub fn morton3(p: Vec3) -> u32 {
     }
     let q = |x: f32| (x.clamp(0.0, 1.0) * 1023.0) as u32;
     spread(q(p.x)) | (spread(q(p.y)) << 1) | (spread(q(p.z)) << 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    proptest! {
+        /// The furthest point along a direction is the furthest of the eight corners.
+        #[test]
+        fn max_along_is_the_furthest_corner(
+            min in proptest::array::uniform3(-100.0f32..100.0),
+            extent in proptest::array::uniform3(0.0f32..50.0),
+            n in proptest::array::uniform3(-1.0f32..1.0),
+        ) {
+            let b = Aabb::new(Vec3::from(min), Vec3::from(min) + Vec3::from(extent));
+            let n = Vec3::from(n);
+            let corners = (0..8).map(|i| {
+                let pick = |bit: usize, lo: f32, hi: f32| if i & bit == 0 { lo } else { hi };
+                n.dot(Vec3::new(pick(1, b.min.x, b.max.x), pick(2, b.min.y, b.max.y), pick(4, b.min.z, b.max.z)))
+            });
+            let furthest = corners.fold(f32::NEG_INFINITY, f32::max);
+            prop_assert!((b.max_along(n) - furthest).abs() <= 1e-4 * (1.0 + furthest.abs()));
+        }
+    }
+
+    #[test]
+    fn an_empty_box_lies_along_no_direction() {
+        assert_eq!(Aabb::EMPTY.max_along(Vec3::X), f32::NEG_INFINITY);
+    }
 }

@@ -264,6 +264,7 @@ fn the_parts_floor_takes_the_parts_next_to_a_seen_part() {
         object_leaf: vec![1; 5],
         node_parent: vec![None, Some(0)],
         part_neighbours: vec![vec![1], vec![0, 2], vec![1, 3], vec![2], vec![]],
+        part_planes: Vec::new(),
     };
     let far = Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0));
     let bounds = vec![far; 5];
@@ -281,6 +282,16 @@ fn the_parts_floor_takes_the_parts_next_to_a_seen_part() {
     assert_eq!([c.object(0), c.object(2)], [0.0, 0.0]);
     assert_eq!("parts".parse::<FloorTest>().unwrap(), FloorTest::PartNeighbours);
     assert_eq!(FloorTest::PartNeighbours.to_string(), "parts");
+
+    // Part 0's face looks up from y = 0, at the cell (y from 0 to 1); part 2's looks up from
+    // y = 5, the cell behind it: it shows the cell only its back, and gets no floor (decision
+    // 137). A part listing no planes counts as facing every cell.
+    let up = |y: f32| vec![glam::Vec4::new(0.0, 1.0, 0.0, y)];
+    let facing = TreeShape { part_planes: vec![up(0.0), up(0.0), up(5.0), vec![], vec![]], ..shape.clone() };
+    let options = PrecomputeOptions { zero_dov_tests: vec![FloorTest::PartNeighbours], ..Default::default() };
+    let c = cell_dov(&[&point], &[], &cell, &bounds, &facing, &options, &cube);
+    assert_eq!([c.object(0), c.object(1), c.object(2)], [floor, 0.01, 0.0]);
+    assert_eq!(c.floored, 1);
 }
 
 #[test]

@@ -370,7 +370,9 @@ fn build_visibility(
         backend = WithRays::wrap(backend, scene)?;
     }
     let bounds = scene.all_object_bounds();
-    let shape = TreeShape { part_neighbours: crate::scene::parts::part_neighbours(scene, &bounds), ..TreeShape::of(tree) };
+    let part_neighbours = crate::scene::parts::part_neighbours(scene, &bounds);
+    let part_planes = crate::scene::parts::part_planes(scene, &part_neighbours);
+    let shape = TreeShape { part_neighbours, part_planes, ..TreeShape::of(tree) };
     let options = PrecomputeOptions::of(v);
     let bar = progress.bar("sample points", 0);
     let dov = precompute_shard(

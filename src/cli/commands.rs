@@ -150,7 +150,7 @@ pub struct VisibilityArgs {
     region_views: u32,
     /// Visible-zero-DoV floor tests, comma-separated: box (the object's box meets the cell),
     /// box:M (within M of it), neighbours (a neighbouring cell's corner sees it), parts (a part
-    /// of a cut object next to a part the cell sees), or none. Default: box,neighbours,parts on
+    /// of a cut object next to a part the cell sees, turning a face to the cell), or none. Default: box,neighbours,parts on
     /// a grid (--grid, --region, or the scene's own) or with --objects file, box,parts on cells
     /// made where viewers stand (their neighbours' corners see into other rooms); box alone with `--samples probe`
     /// without region rays (its rays check what the neighbour test would guess); with region

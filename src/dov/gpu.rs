@@ -11,8 +11,10 @@
 //!
 //! **Draw order is descending id**, as the CPU backend's tie rule needs among faces seen from one
 //! side: with a `GreaterEqual` reverse-Z depth test the later-drawn lower id wins an exact depth
-//! tie (the CPU's front-before-back at ties has no GPU counterpart: a rasteriser gives a pixel on
-//! an edge to one triangle, so edges do not tie). Instances lie in the
+//! tie. **Back faces are drawn 0.1 % further than they lie** (the fragment shader writes their
+//! depth scaled by `BACK_FACE_DEPTH_SCALE`), so that where the face of a solid and the face
+//! behind its edge meet in a pixel at depths only rounding tells apart (a slab's far edge seen at
+//! a grazing angle), the front wins, as on the CPU (decision 138). Instances lie in the
 //! instance buffer in descending id order; per face, the objects that survive the frustum test
 //! become draw commands in that order, consecutive objects with the same base mesh and level
 //! merged into one instanced draw. Where the device has indirect draws with a first instance

@@ -37,9 +37,25 @@ fn vs_main(
     return out;
 }
 
+struct FragmentOut {
+    @location(0) id_bits: u32,
+    @builtin(frag_depth) depth: f32,
+};
+
+// How much further a back face is drawn than it lies (relative, in distance): where the face of a
+// solid and the face behind its edge meet in a pixel, the depth test may pick either by the
+// rounding of their interpolated depths; the CPU tracer gives such a tie to the front face
+// (docs/decisions.md, 136 and 138), and so does this.
+const BACK_FACE_DEPTH_SCALE: f32 = 0.999;
+
 @fragment
-fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u32 {
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> FragmentOut {
+    var out: FragmentOut;
     // A mirroring instance winds its triangles the other way on screen: its outside shows as
     // "back", so its flag bit flips the test.
-    return in.id_bits ^ select(0x80000000u, 0u, front);
+    out.id_bits = in.id_bits ^ select(0x80000000u, 0u, front);
+    // Reverse Z: depth is near / distance, so a smaller depth lies further away.
+    let back = (out.id_bits & 0x80000000u) != 0u;
+    out.depth = select(in.clip.z, in.clip.z * BACK_FACE_DEPTH_SCALE, back);
+    return out;
 }

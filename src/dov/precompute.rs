@@ -17,7 +17,7 @@ use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use super::sampler::{CellSampler, CellSite, Tally};
 use super::sampling::{is_inside, seen_by};
@@ -28,6 +28,7 @@ use crate::format::BakePhases;
 use crate::format::params::{Sampling, VisibilityParams};
 use crate::geom::Aabb;
 use crate::grid::ViewGrid;
+use crate::scene::parts::turns_a_face_to;
 use crate::progress::Report;
 
 /// The shape of the object tree, as far as DoV aggregation needs it, and which objects are
@@ -41,13 +42,17 @@ pub struct TreeShape {
     /// Each object's neighbouring parts ([`crate::scene::parts::part_neighbours`]); empty (for
     /// all objects, or for one) where nothing was cut.
     pub part_neighbours: Vec<Vec<u32>>,
+    /// Each part's face planes ([`crate::scene::parts::part_planes`]), for the parts floor's
+    /// test that a part turns a face to the cell; empty where nothing was cut, and a part that
+    /// lists none counts as facing every cell.
+    pub part_planes: Vec<Vec<Vec4>>,
 }
 
 impl TreeShape {
     /// The shape of `tree`: its objects' leaves and its nodes' parents, no parts' neighbours.
     pub fn of(tree: &crate::rtree::RTree) -> Self {
         let node_parent = tree.nodes.iter().map(|n| n.parent).collect();
-        Self { object_leaf: tree.object_leaves(), node_parent, part_neighbours: Vec::new() }
+        Self { object_leaf: tree.object_leaves(), node_parent, part_neighbours: Vec::new(), part_planes: Vec::new() }
     }
 
     /// Checks that every id is in range, every node reaches a root (no cycles) and neighbouring
@@ -131,6 +136,8 @@ pub struct FloorContext<'a> {
     pub seen_here: &'a HashSet<u32>,
     /// Each object's neighbouring parts ([`TreeShape::part_neighbours`]).
     pub part_neighbours: &'a [Vec<u32>],
+    /// Each part's face planes ([`TreeShape::part_planes`]).
+    pub part_planes: &'a [Vec<Vec4>],
 }
 
 impl FloorTest {
@@ -142,10 +149,12 @@ impl FloorTest {
                 !bounds.is_empty() && bounds.intersects(&Aabb::new(cell.cell_box.min - m, cell.cell_box.max + m))
             }
             FloorTest::NeighbourCorners => cell.seen_nearby.contains(&object),
-            FloorTest::PartNeighbours => cell
-                .part_neighbours
-                .get(object as usize)
-                .is_some_and(|parts| parts.iter().any(|p| cell.seen_here.contains(p) || cell.seen_nearby.contains(p))),
+            FloorTest::PartNeighbours => {
+                let seen = |p: &u32| cell.seen_here.contains(p) || cell.seen_nearby.contains(p);
+                let planes = cell.part_planes.get(object as usize).map_or(&[][..], Vec::as_slice);
+                cell.part_neighbours.get(object as usize).is_some_and(|parts| parts.iter().any(seen))
+                    && turns_a_face_to(planes, cell.cell_box)
+            }
         }
     }
 }
@@ -524,6 +533,7 @@ fn combine(points: &[&PointDov], cell_box: &Aabb, c: &CellContext) -> CellDov {
             seen_nearby: &seen_around,
             seen_here: &seen_here,
             part_neighbours: &shape.part_neighbours,
+            part_planes: &shape.part_planes,
         };
         // Every object a test can find: near the cell's box, seen nearby, or a neighbouring part
         // of what is seen (part neighbours list each other, [`TreeShape::check`]).
@@ -597,6 +607,7 @@ mod tests {
             seen in proptest::collection::vec(any::<u16>(), 0..12),
             around in proptest::collection::vec(any::<u16>(), 0..12),
             pairs in proptest::collection::vec((any::<u16>(), any::<u16>()), 0..30),
+            planes in proptest::collection::vec((proptest::array::uniform3(-1.0f32..1.0), -20.0f32..20.0), 0..40),
             margin in 0.0f32..3.0,
             tests in 1u8..16,
         ) {
@@ -619,7 +630,11 @@ mod tests {
                     part_neighbours[b as usize].push(a);
                 }
             }
-            let shape = TreeShape { object_leaf: vec![0; n], node_parent: vec![None], part_neighbours };
+            // One face plane for the first objects (some turned away from a cell), none for the rest.
+            let part_planes = (0..n)
+                .map(|k| planes.get(k).map(|&(normal, offset)| Vec3::from(normal).normalize_or_zero().extend(offset)).into_iter().collect())
+                .collect();
+            let shape = TreeShape { object_leaf: vec![0; n], node_parent: vec![None], part_neighbours, part_planes };
             shape.check(n).unwrap();
             let chosen = [FloorTest::BoxWithin(0.0), FloorTest::BoxWithin(margin), FloorTest::NeighbourCorners, FloorTest::PartNeighbours];
             let options = PrecomputeOptions {

@@ -167,10 +167,13 @@ pub enum FloorTest {
     NeighbourCorners,
     /// A part that hdov cut (`--objects geometry`) whose neighbouring part of the same file
     /// object the cell's own points see, or, with [`FloorTest::NeighbourCorners`], what that test
-    /// counts as seen nearby: a cut surface seen up to a part's edge goes on past it
-    /// (a strip of ground or a wall seen at a grazing angle through a gap), where rays aimed at
-    /// the part's surface rarely land on its visible sliver. Free; finds nothing in a scene whose
-    /// objects were not cut.
+    /// counts as seen nearby, and which turns a face to the cell (some point of the cell's box
+    /// in front of one of its faces' planes, [`crate::scene::parts::turns_a_face_to`]): a cut
+    /// surface seen up to a part's edge goes on past it (a strip of ground or a wall seen at a
+    /// grazing angle through a gap), where rays aimed at the part's surface rarely land on its
+    /// visible sliver; a part turned away (a wall's face to the next room, a floor's underside)
+    /// shows the cell only its back, and only through a gap the samplers measure (decision
+    /// 137). Free; finds nothing in a scene whose objects were not cut.
     PartNeighbours,
 }
 

@@ -8,7 +8,7 @@
 //! instances stay instances (of its parts). Every part keeps its source object's name and says
 //! which part it is ([`Object::part`]).
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use super::{BaseMesh, Mesh, Object, Scene};
 use crate::geom::{Aabb, max_scale};
@@ -154,6 +154,55 @@ pub fn part_neighbours(scene: &Scene, bounds: &[Aabb]) -> Vec<Vec<u32>> {
     out
 }
 
+/// The most face planes [`part_planes`] lists for one part: a part whose faces turn more ways (a
+/// curved or scanned surface) lists none, and [`turns_a_face_to`] counts it as facing every box.
+pub const MAX_PART_PLANES: usize = 32;
+
+/// How far behind a plane a box may lie and still count as in front of it, relative to the
+/// plane's distance from the origin plus one: more than the rounding of nearly equal planes
+/// listed once ([`part_planes`]), so that the facing test errs towards the floor.
+const PLANE_SLACK: f32 = 1e-4;
+
+/// For each object of `scene` that has neighbouring parts (`neighbours`, [`part_neighbours`]),
+/// the planes of its faces, each as its unit normal towards the front (counter-clockwise,
+/// [`Scene::object_faces`]) and its offset along it, nearly equal planes once; at most
+/// [`MAX_PART_PLANES`], else none. Empty for every other object. O(triangles of cut parts ·
+/// planes).
+pub fn part_planes(scene: &Scene, neighbours: &[Vec<u32>]) -> Vec<Vec<Vec4>> {
+    (0..scene.objects.len())
+        .map(|object| {
+            if neighbours.get(object).is_none_or(Vec::is_empty) {
+                return Vec::new();
+            }
+            let mut planes: Vec<Vec4> = Vec::new();
+            for [a, b, c] in scene.object_faces(object) {
+                let n = (b - a).cross(c - a).normalize_or_zero();
+                if n == Vec3::ZERO {
+                    continue;
+                }
+                let plane = n.extend(n.dot(a));
+                let same = |q: &Vec4| (*q - plane).abs().max_element() <= 0.1 * PLANE_SLACK * (1.0 + plane.w.abs());
+                if !planes.iter().any(same) {
+                    if planes.len() == MAX_PART_PLANES {
+                        return Vec::new();
+                    }
+                    planes.push(plane);
+                }
+            }
+            planes
+        })
+        .collect()
+}
+
+/// Whether some face of a part with face planes `planes` ([`part_planes`]) turns its front to
+/// some point of `b`: some point of the box lies in front of one of its planes. True for a part
+/// that lists no planes. A point behind every plane of a part sees, of it, only backs: through a
+/// gap in what lies in front (a sampler's rays find those), never a surface going on past a
+/// seen edge, which is what the parts floor is for.
+pub fn turns_a_face_to(planes: &[Vec4], b: &Aabb) -> bool {
+    planes.is_empty() || planes.iter().any(|q| b.max_along(q.truncate()) > q.w - PLANE_SLACK * (1.0 + q.w.abs()))
+}
+
 #[cfg(test)]
 mod tests {
     use glam::Mat4;
@@ -279,5 +328,43 @@ mod tests {
         let split = split_large_objects(&scene, 4.0);
         assert_eq!(split.objects.len(), 2);
         assert_eq!(split.triangle_count(), 2);
+    }
+
+    #[test]
+    fn a_slab_s_parts_face_the_boxes_above_it_only() {
+        // `slab` is wound counter-clockwise seen from above: every part's one plane is y = 0, up.
+        let split = split_large_objects(&scene_of(vec![slab(16.0, 16)], &[("slab", 0, Mat4::IDENTITY)]), 4.0);
+        let planes = part_planes(&split, &part_neighbours(&split, &split.all_object_bounds()));
+        assert!(split.objects.len() > 1);
+        for p in &planes {
+            assert_eq!(p.len(), 1);
+            assert!((p[0] - Vec4::new(0.0, 1.0, 0.0, 0.0)).abs().max_element() < 1e-6, "{p:?}");
+        }
+        let cell = |y0: f32, y1: f32| Aabb::new(Vec3::new(1.0, y0, 1.0), Vec3::new(3.0, y1, 3.0));
+        assert!(turns_a_face_to(&planes[0], &cell(1.0, 2.0)));
+        assert!(turns_a_face_to(&planes[0], &cell(-1.0, 0.5)));
+        assert!(!turns_a_face_to(&planes[0], &cell(-2.0, -1.0)));
+        // A box whose top lies on the plane sees the faces edge-on: counted as facing them.
+        assert!(turns_a_face_to(&planes[0], &cell(-2.0, 0.0)));
+        assert!(turns_a_face_to(&[], &cell(-2.0, -1.0)));
+    }
+
+    #[test]
+    fn a_part_whose_faces_turn_too_many_ways_lists_no_plane() {
+        // A fan of 40 triangles around the y axis, each turned its own way; and one flat one.
+        let mut fan = Mesh::default();
+        for k in 0..40 {
+            let a = k as f32 * std::f32::consts::TAU / 40.0;
+            let at = |a: f32, y: f32| [a.cos(), y, a.sin()];
+            let first = fan.positions.len() as u32;
+            fan.positions.extend([at(a, 0.0), at(a, 1.0), at(a + 0.1, 0.0)]);
+            fan.indices.extend([first, first + 1, first + 2]);
+        }
+        let scene = scene_of(vec![fan, slab(1.0, 1)], &[("fan", 0, Mat4::IDENTITY), ("flat", 1, Mat4::IDENTITY)]);
+        let neighbours = vec![vec![1], vec![0]];
+        let planes = part_planes(&scene, &neighbours);
+        assert!(planes[0].is_empty());
+        assert_eq!(planes[1].len(), 1);
+        assert!(part_planes(&scene, &[vec![], vec![]]).iter().all(Vec::is_empty));
     }
 }

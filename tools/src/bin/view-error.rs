@@ -14,7 +14,8 @@
 //! - **Builds**: one per sampler (`--samples` syntax), with the CPU backend at `--resolution` and
 //!   the command's default floors; the visibility stage's seconds come from the manifest.
 //! - **Viewpoints**: `--viewpoints` per cell, uniformly random strictly inside it (seeded; never a
-//!   corner or a Halton point), redrawn where the truth finds them inside geometry.
+//!   corner or a Halton point), redrawn where the truth finds them inside geometry or nearer to a
+//!   surface than its near plane (which cuts a hole in the surface and shows what lies behind).
 //! - **Truth**: a full id cube map of the whole scene at `--truth` texels per edge, by the other
 //!   tracer: the GPU backend (wgpu) where an adapter exists, else the CPU backend, flagged as the
 //!   same tracer.
@@ -42,7 +43,7 @@ use hdov::{
 };
 use hdov::{ItemKind, VisibilityParams};
 use hdov_testkit::scenes::Rng;
-use hdov_testkit::view_error::{dov_excess, frame_error, random_viewpoint, wrong_share};
+use hdov_testkit::view_error::{dov_excess, frame_error, nearer_than, random_viewpoint, wrong_share};
 use hdov_tools::experiments::charts::{Panel, Series, write_svg};
 use hdov_tools::experiments::quantile;
 
@@ -79,7 +80,7 @@ type Worst = (f64, usize, Vec<(String, f64)>);
              viewpoints inside its cells, per sampler",
     long_about = "From-region error as users see it (issue 22): builds the scene's database with each sampler (CPU\n\
                   backend at --resolution, the command's default floors), then, at --viewpoints random viewpoints\n\
-                  strictly inside each cell (seeded; redrawn where the truth finds them inside geometry), measures\n\
+                  strictly inside each cell (seeded; redrawn where the truth finds them inside geometry or nearer a surface than its near plane), measures\n\
                   the wrong share: the solid angle of texels whose object the cell's naive answer lacks, over that of\n\
                   all texels that show an object. The truth is a full id cube map of the whole scene at --truth by the\n\
                   other tracer (the GPU backend where an adapter exists, else the CPU backend, flagged as the same\n\
@@ -186,6 +187,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cube = truth.cube_map().clone();
     let mut ids = IdCube::new(truth_r);
     let mut views = Vec::new();
+    let (bounds, near) = (measured.all_object_bounds(), hdov::dov::default_near(&measured.bounds()));
     for &cell in &cells {
         let cell_box = grid.cell_box(grid.cell_coords(cell));
         let mut kept = 0;
@@ -196,7 +198,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let at = random_viewpoint(&cell_box, &mut rng);
             truth.render_ids(at, &mut ids)?;
             let point = ids.dov(&cube);
-            if is_inside(&point) {
+            if is_inside(&point) || nearer_than(&measured, &bounds, at, near) {
                 continue;
             }
             let all = wrong_share(&ids, &cube, |_| false);

@@ -188,6 +188,7 @@ pub fn audit_zero_dov(
                     seen_nearby: &around,
                     seen_here: &sparse,
                     part_neighbours: &[],
+                    part_planes: &[],
                 };
                 let floored = audit.test.finds(object, bounds, &cell);
                 let seen = by_dense.contains(&object);

@@ -80,6 +80,52 @@ pub fn random_viewpoint(cell: &Aabb, rng: &mut Rng) -> Vec3 {
     Vec3::new(rng.range(lo.x, hi.x), rng.range(lo.y, hi.y), rng.range(lo.z, hi.z))
 }
 
+/// Whether `at` lies within `near` of a surface of `scene` (its objects' world boxes `bounds`,
+/// [`hdov::Scene::all_object_bounds`]): a truth whose near plane lies at `near` cuts a hole in
+/// such a surface and shows what lies behind it (the inside of a wall 1 cm away), which a viewer
+/// there would not see. Such viewpoints are redrawn, as those inside geometry are. O(objects +
+/// the triangles of those whose boxes lie within `near`).
+pub fn nearer_than(scene: &hdov::Scene, bounds: &[Aabb], at: Vec3, near: f32) -> bool {
+    let around = Aabb::new(at - Vec3::splat(near), at + Vec3::splat(near));
+    (0..scene.objects.len())
+        .filter(|&o| bounds[o].intersects(&around))
+        .any(|o| scene.object_triangles(o).any(|t| closest_on_triangle(at, t).distance_squared(at) < near * near))
+}
+
+/// The point of triangle `[a, b, c]` nearest `p` (Ericson, *Real-Time Collision Detection*,
+/// 5.1.5).
+fn closest_on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
 /// Of the objects `point` sees, how many it sees with more DoV than `stored` (the cell's DoV of
 /// an object, 0 where the answer lacks it) plus `texels` centre texels plus `relative` of its
 /// own DoV: `(exceeding, seen)`.
