@@ -146,16 +146,15 @@ fn backends_agree_on_many_boxes() {
 /// (decisions 136 and 138): from the street, outside every closed box, no texel shows a back.
 #[test]
 fn the_far_edges_of_a_slab_show_its_top_not_the_back_of_its_sides() {
-    if !gpu_or_skip() {
-        return;
-    }
     let (scene, grid) = street_with_gaps();
     let parts = hdov::scene::parts::split_large_objects(
         &scene,
         hdov::scene::parts::part_extent_for_cells(grid.cell_size().max_element()),
     );
-    let mut backends: [Box<dyn DovBackend>; 2] =
-        [Box::new(CpuBackend::new(&parts, 256).unwrap()), Box::new(GpuBackend::new(&parts, 256).unwrap())];
+    let mut backends: Vec<Box<dyn DovBackend>> = vec![Box::new(CpuBackend::new(&parts, 256).unwrap())];
+    if gpu_or_skip() {
+        backends.push(Box::new(GpuBackend::new(&parts, 256).unwrap()));
+    }
     for eye in [
         Vec3::new(89.84, 1.97, 3.40),
         Vec3::new(77.31, 1.90, 4.39),

@@ -151,3 +151,24 @@ fn region_rays_never_do_worse_than_corners_and_find_what_gaps_show() {
         assert!(wrong_region * factor <= wrong_corners, "{name}: {wrong_region:e} against corners' {wrong_corners:e}");
     }
 }
+
+/// The nearest point of a triangle, in each of its regions (a corner, an edge, the inside) and
+/// for one of no area; and viewpoints nearer a wall than the truth can see are told apart.
+#[test]
+fn viewpoints_nearer_a_surface_than_the_near_plane_are_found() {
+    use hdov_testkit::view_error::{closest_on_triangle, nearer_than};
+    let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    assert_eq!(closest_on_triangle(Vec3::new(0.25, 0.25, 2.0), t), Vec3::new(0.25, 0.25, 0.0));
+    assert_eq!(closest_on_triangle(Vec3::new(-1.0, -1.0, 0.0), t), Vec3::ZERO);
+    assert_eq!(closest_on_triangle(Vec3::new(0.5, -1.0, 3.0), t), Vec3::new(0.5, 0.0, 0.0));
+    assert_eq!(closest_on_triangle(Vec3::new(2.0, 2.0, 0.0), t), Vec3::new(0.5, 0.5, 0.0));
+    let flat = [Vec3::ZERO, Vec3::X, 2.0 * Vec3::X];
+    assert_eq!(closest_on_triangle(Vec3::new(1.9, 1.0, 0.0), flat), Vec3::new(1.9, 0.0, 0.0));
+    let mut b = SceneBuilder::default();
+    b.aabox(Vec3::ZERO, Vec3::new(10.0, 3.0, 0.2));
+    let scene = b.build();
+    let bounds = scene.all_object_bounds();
+    assert!(nearer_than(&scene, &bounds, Vec3::new(5.0, 1.5, 0.21), 0.02));
+    assert!(!nearer_than(&scene, &bounds, Vec3::new(5.0, 1.5, 0.25), 0.02));
+    assert!(nearer_than(&scene, &bounds, Vec3::new(10.01, 3.01, 0.1), 0.02));
+}

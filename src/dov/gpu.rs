@@ -11,10 +11,11 @@
 //!
 //! **Draw order is descending id**, as the CPU backend's tie rule needs among faces seen from one
 //! side: with a `GreaterEqual` reverse-Z depth test the later-drawn lower id wins an exact depth
-//! tie. **Back faces are drawn 0.1 % further than they lie** (the fragment shader writes their
+//! tie. **Back faces are drawn 1 % further than they lie** (the fragment shader writes their
 //! depth scaled by `BACK_FACE_DEPTH_SCALE`), so that where the face of a solid and the face
-//! behind its edge meet in a pixel at depths only rounding tells apart (a slab's far edge seen at
-//! a grazing angle), the front wins, as on the CPU (decision 138). Instances lie in the
+//! behind its edge meet in a pixel at depths that rounding or a grazing angle blurs (a slab's far
+//! edge, a wall seen along its length), the front wins, as the CPU's tie rule has it within its
+//! far narrower window (decision 138). Instances lie in the
 //! instance buffer in descending id order; per face, the objects that survive the frustum test
 //! become draw commands in that order, consecutive objects with the same base mesh and level
 //! merged into one instanced draw. Where the device has indirect draws with a first instance

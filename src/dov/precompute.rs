@@ -68,6 +68,12 @@ impl TreeShape {
         if let Some(&bad) = self.object_leaf.iter().find(|&&l| l as usize >= nodes) {
             return Err(Error::bad_param(Param::TreeShape, format!("leaf {bad} out of range ({nodes} nodes)")));
         }
+        if !self.part_planes.is_empty() && self.part_planes.len() != objects {
+            return Err(Error::bad_param(
+                Param::TreeShape,
+                format!("face planes for {} of {objects} objects", self.part_planes.len()),
+            ));
+        }
         // The floors find a part through the parts that list it ([`CellContext::near`]).
         for (object, parts) in self.part_neighbours.iter().enumerate() {
             let listed_back = |&p: &u32| self.part_neighbours.get(p as usize).is_some_and(|back| back.contains(&(object as u32)));
@@ -661,6 +667,19 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_shape_with_planes_for_some_objects_only_is_refused() {
+        let shape = |planes: usize| TreeShape {
+            object_leaf: vec![0; 3],
+            node_parent: vec![None],
+            part_planes: vec![Vec::new(); planes],
+            ..Default::default()
+        };
+        assert!(shape(0).check(3).is_ok());
+        assert!(shape(3).check(3).is_ok());
+        assert!(shape(2).check(3).is_err());
     }
 
     #[test]

@@ -158,10 +158,15 @@ pub fn part_neighbours(scene: &Scene, bounds: &[Aabb]) -> Vec<Vec<u32>> {
 /// curved or scanned surface) lists none, and [`turns_a_face_to`] counts it as facing every box.
 pub const MAX_PART_PLANES: usize = 32;
 
-/// How far behind a plane a box may lie and still count as in front of it, relative to the
-/// plane's distance from the origin plus one: more than the rounding of nearly equal planes
-/// listed once ([`part_planes`]), so that the facing test errs towards the floor.
-const PLANE_SLACK: f32 = 1e-4;
+/// How far apart two planes may be and still be listed once ([`part_planes`]): in their unit
+/// normals' components, and in their offsets relative to the larger offset plus one.
+const SAME_PLANE: f32 = 1e-5;
+
+/// How far behind a plane a box may lie and still count as in front of it, relative to one plus
+/// the plane's offset plus the box's largest coordinate: ten times what listing nearly equal
+/// planes once can move `n · p` at a point of the box, so that the facing test errs towards
+/// the floor wherever the scene lies.
+const PLANE_SLACK: f32 = 10.0 * SAME_PLANE;
 
 /// For each object of `scene` that has neighbouring parts (`neighbours`, [`part_neighbours`]),
 /// the planes of its faces, each as its unit normal towards the front (counter-clockwise,
@@ -181,7 +186,10 @@ pub fn part_planes(scene: &Scene, neighbours: &[Vec<u32>]) -> Vec<Vec<Vec4>> {
                     continue;
                 }
                 let plane = n.extend(n.dot(a));
-                let same = |q: &Vec4| (*q - plane).abs().max_element() <= 0.1 * PLANE_SLACK * (1.0 + plane.w.abs());
+                let same = |q: &Vec4| {
+                    (q.truncate() - n).abs().max_element() <= SAME_PLANE
+                        && (q.w - plane.w).abs() <= SAME_PLANE * (1.0 + q.w.abs().max(plane.w.abs()))
+                };
                 if !planes.iter().any(same) {
                     if planes.len() == MAX_PART_PLANES {
                         return Vec::new();
@@ -200,7 +208,8 @@ pub fn part_planes(scene: &Scene, neighbours: &[Vec<u32>]) -> Vec<Vec<Vec4>> {
 /// gap in what lies in front (a sampler's rays find those), never a surface going on past a
 /// seen edge, which is what the parts floor is for.
 pub fn turns_a_face_to(planes: &[Vec4], b: &Aabb) -> bool {
-    planes.is_empty() || planes.iter().any(|q| b.max_along(q.truncate()) > q.w - PLANE_SLACK * (1.0 + q.w.abs()))
+    let reach = b.min.abs().max(b.max.abs()).max_element();
+    planes.is_empty() || planes.iter().any(|q| b.max_along(q.truncate()) > q.w - PLANE_SLACK * (1.0 + q.w.abs() + reach))
 }
 
 #[cfg(test)]
@@ -347,6 +356,36 @@ mod tests {
         // A box whose top lies on the plane sees the faces edge-on: counted as facing them.
         assert!(turns_a_face_to(&planes[0], &cell(-2.0, 0.0)));
         assert!(turns_a_face_to(&[], &cell(-2.0, -1.0)));
+    }
+
+    #[test]
+    fn far_from_the_origin_faces_turned_apart_stay_apart() {
+        // Two faces through one point 14 km out, turned 0.6° apart, both planes 10 km from the
+        // origin: listed as two planes (a tolerance relative to the offset merged them), and
+        // each is in front of exactly the boxes it is in front of.
+        let (a, t) = (0.6f32.to_radians().sin(), 0.6f32.to_radians().cos());
+        let far = Vec3::new(10_000.0, 10_000.0, 10_000.0 * (1.0 - t) / a);
+        let p = |v: Vec3| (far + v).to_array();
+        let m = Mesh {
+            positions: vec![
+                p(Vec3::ZERO),
+                p(Vec3::Z),
+                p(Vec3::X),
+                p(Vec3::ZERO),
+                p(Vec3::new(0.0, -a, t)),
+                p(Vec3::new(1.0, 0.0, 0.0)),
+            ],
+            indices: vec![0, 1, 2, 3, 4, 5],
+        };
+        let scene = scene_of(vec![m, slab(1.0, 1)], &[("two", 0, Mat4::IDENTITY), ("flat", 1, Mat4::IDENTITY)]);
+        let planes = part_planes(&scene, &[vec![1], vec![0]]);
+        assert_eq!(planes[0].len(), 2, "{:?}", planes[0]);
+        for q in &planes[0] {
+            let n = q.truncate();
+            let below = Aabb::new(far + Vec3::new(0.0, -31.0, 30.0), far + Vec3::new(1.0, -30.0, 31.0));
+            let facing = turns_a_face_to(&[*q], &below);
+            assert_eq!(facing, below.max_along(n) > q.w, "{q:?}");
+        }
     }
 
     #[test]

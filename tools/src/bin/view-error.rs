@@ -187,7 +187,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cube = truth.cube_map().clone();
     let mut ids = IdCube::new(truth_r);
     let mut views = Vec::new();
-    let (bounds, near) = (measured.all_object_bounds(), hdov::dov::default_near(&measured.bounds()));
+    // The truth clips at forward depth `near` (it was opened with the scene's default): a texel's
+    // direction is up to √3 times its forward depth.
+    let bounds = measured.all_object_bounds();
+    let clipped_within = 3f32.sqrt() * hdov::dov::default_near(&measured.bounds());
     for &cell in &cells {
         let cell_box = grid.cell_box(grid.cell_coords(cell));
         let mut kept = 0;
@@ -196,9 +199,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 break;
             }
             let at = random_viewpoint(&cell_box, &mut rng);
+            if nearer_than(&measured, &bounds, at, clipped_within) {
+                continue;
+            }
             truth.render_ids(at, &mut ids)?;
             let point = ids.dov(&cube);
-            if is_inside(&point) || nearer_than(&measured, &bounds, at, near) {
+            if is_inside(&point) {
                 continue;
             }
             let all = wrong_share(&ids, &cube, |_| false);

@@ -80,21 +80,22 @@ pub fn random_viewpoint(cell: &Aabb, rng: &mut Rng) -> Vec3 {
     Vec3::new(rng.range(lo.x, hi.x), rng.range(lo.y, hi.y), rng.range(lo.z, hi.z))
 }
 
-/// Whether `at` lies within `near` of a surface of `scene` (its objects' world boxes `bounds`,
-/// [`hdov::Scene::all_object_bounds`]): a truth whose near plane lies at `near` cuts a hole in
-/// such a surface and shows what lies behind it (the inside of a wall 1 cm away), which a viewer
-/// there would not see. Such viewpoints are redrawn, as those inside geometry are. O(objects +
-/// the triangles of those whose boxes lie within `near`).
-pub fn nearer_than(scene: &hdov::Scene, bounds: &[Aabb], at: Vec3, near: f32) -> bool {
-    let around = Aabb::new(at - Vec3::splat(near), at + Vec3::splat(near));
-    (0..scene.objects.len())
-        .filter(|&o| bounds[o].intersects(&around))
-        .any(|o| scene.object_triangles(o).any(|t| closest_on_triangle(at, t).distance_squared(at) < near * near))
+/// Whether `at` lies within `distance` of a surface of `scene` (its objects' world boxes `bounds`,
+/// [`hdov::Scene::all_object_bounds`]). A truth whose cube faces clip at forward depth `near`
+/// cuts a hole into a surface nearer than `√3 · near` (a texel's direction is up to √3 times
+/// longer than its forward depth) and shows what lies behind it (the inside of a wall 1 cm
+/// away), which a viewer there would not see: such viewpoints are redrawn, as those inside
+/// geometry are. O(objects + the triangles of those whose boxes lie within `distance`).
+pub fn nearer_than(scene: &hdov::Scene, bounds: &[Aabb], at: Vec3, distance: f32) -> bool {
+    let around = Aabb::new(at - Vec3::splat(distance), at + Vec3::splat(distance));
+    (0..scene.objects.len()).filter(|&o| bounds[o].intersects(&around)).any(|o| {
+        scene.object_triangles(o).any(|t| closest_on_triangle(at, t).distance_squared(at) < distance * distance)
+    })
 }
 
 /// The point of triangle `[a, b, c]` nearest `p` (Ericson, *Real-Time Collision Detection*,
 /// 5.1.5).
-fn closest_on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
+pub fn closest_on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {
@@ -122,8 +123,15 @@ fn closest_on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
     if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
         return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
     }
-    let denom = 1.0 / (va + vb + vc);
-    a + ab * (vb * denom) + ac * (vc * denom)
+    let sum = va + vb + vc;
+    if sum <= 0.0 {
+        // A triangle of no area (collinear corners): the nearest of its corners.
+        return [a, b, c]
+            .into_iter()
+            .min_by(|x, y| x.distance_squared(p).total_cmp(&y.distance_squared(p)))
+            .unwrap_or(a);
+    }
+    a + ab * (vb / sum) + ac * (vc / sum)
 }
 
 /// Of the objects `point` sees, how many it sees with more DoV than `stored` (the cell's DoV of
