@@ -13,19 +13,8 @@ use hdov::{
 /// into four 20 × 20 m rooms 3 m high; cells of 2 m at eye height.
 fn four_rooms() -> Scene {
     let mut s = Scene::default();
-    let n = 40u32;
     let mut floor = hdov::Mesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            floor.positions.push([i as f32, 0.0, j as f32]);
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            floor.indices.extend([a, a + n + 1, a + 1, a + 1, a + n + 1, a + n + 2]);
-        }
-    }
+    sheet(&mut floor, Vec3::ZERO, Vec3::Z * 40.0, Vec3::X * 40.0, 40, 40);
     let mesh = s.add_mesh("floor", floor);
     s.add_object("floor", mesh, Mat4::IDENTITY);
     let (t, h) = (0.2, 3.0);
